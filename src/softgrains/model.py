@@ -1,0 +1,165 @@
+"""Model (what a run does not change) and State (what evolves), built from a validated Case.
+
+Points of all bodies live in flat arrays, sorted by body: body b owns the slice
+``model.bodies[b].points``. Per-point constants (mass, reference volume, law code, Lamé
+parameters) sit in the Model; positions, velocities, accelerations, F, σ and V in the State.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from softgrains.errors import CaseError
+from softgrains.geometry import Disk, Polygon, Rectangle, Shape, seed_points
+from softgrains.grid.lattice import Lattice
+from softgrains.grid.shape_functions import SHAPE_FUNCTIONS
+from softgrains.integrator.implicit import DirichletBox, IntegratorSettings
+from softgrains.materials import lame_parameters, law_code
+
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class BodySpec:
+    """One body: name, kind, material and its slice of the point arrays."""
+
+    index: int
+    name: str
+    kind: str  # "deformable" | "kinematic"
+    material: str
+    points: slice
+    shape: Shape
+
+    @property
+    def deformable(self) -> bool:
+        return self.kind == "deformable"
+
+
+@dataclass
+class Model:
+    dim: int
+    lattice: Lattice
+    shape_kind: int
+    points_per_cell: int
+    bodies: list[BodySpec]
+    mass: np.ndarray
+    vol0: np.ndarray
+    body_id: np.ndarray
+    law: np.ndarray
+    lam: np.ndarray
+    mu: np.ndarray
+    gravity: np.ndarray
+    integrator: IntegratorSettings
+    constraints: dict[int, list[DirichletBox]] = field(default_factory=dict)
+
+    @property
+    def n_points(self) -> int:
+        return self.mass.size
+
+
+@dataclass
+class State:
+    time: float
+    step: int
+    x: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+    F: np.ndarray
+    sigma: np.ndarray
+    vol: np.ndarray
+    body_velocity: np.ndarray  # (B, d): prescribed velocity of kinematic bodies
+
+
+def make_shape(body) -> Shape:
+    """The geometric shape of a case body."""
+    if body.shape == "disk":
+        return Disk(np.asarray(body.center, dtype=float), float(body.radius))
+    if body.shape == "rectangle":
+        return Rectangle(np.asarray(body.lower, dtype=float), np.asarray(body.upper, dtype=float))
+    return Polygon(np.asarray(body.vertices, dtype=float))
+
+
+def _initial_velocity(body, shape: Shape, x: np.ndarray) -> np.ndarray:
+    v = np.tile(np.asarray(body.velocity, dtype=float), (len(x), 1))
+    if body.kind != "deformable":
+        return v
+    if getattr(body, "velocity_gradient", None) is not None:
+        L = np.asarray(body.velocity_gradient, dtype=float)
+        v += (x - shape.centroid) @ L.T
+    sine = getattr(body, "velocity_sine", None)
+    if sine is not None:
+        k = np.asarray(sine.wavenumber, dtype=float)
+        phase = (x - np.asarray(sine.origin, dtype=float)) @ k
+        v += np.sin(phase)[:, None] * np.asarray(sine.amplitude, dtype=float)
+    return v
+
+
+def build(case) -> tuple[Model, State]:
+    """Seed the bodies' points and set up Model and State from a validated Case."""
+    sim, grid = case.simulation, case.grid
+    dim = sim.dimension
+    lattice = Lattice.covering(grid.origin, grid.size, grid.cell_size)
+    xs, vs, masses, vols, laws, lams, mus, ids, bodies = [], [], [], [], [], [], [], [], []
+    start = 0
+    for b, body in enumerate(case.bodies):
+        shape = make_shape(body)
+        x, v0 = seed_points(shape, lattice.domain_lower, grid.cell_size, grid.points_per_cell)
+        name = body.name or f"body{b}"
+        if len(x) == 0:
+            raise CaseError(f"[bodies.{b}] ('{name}'): the shape holds no material point at "
+                            f"cell_size {grid.cell_size} and points_per_cell "
+                            f"{grid.points_per_cell}; make it larger or the grid finer.")
+        mat = case.materials[body.material]
+        lam, mu = lame_parameters(mat.young, mat.poisson)
+        n = len(x)
+        xs.append(x)
+        vs.append(_initial_velocity(body, shape, x))
+        masses.append(np.full(n, mat.density * v0))
+        vols.append(np.full(n, v0))
+        laws.append(np.full(n, law_code(mat.law), dtype=np.int64))
+        lams.append(np.full(n, lam))
+        mus.append(np.full(n, mu))
+        ids.append(np.full(n, b, dtype=np.int64))
+        bodies.append(BodySpec(b, name, body.kind, body.material, slice(start, start + n), shape))
+        start += n
+    x = np.concatenate(xs)
+    n = len(x)
+    gravity = np.zeros(dim)
+    if getattr(case, "gravity", None) is not None:
+        gravity = np.asarray(case.gravity.acceleration, dtype=float)
+    settings = IntegratorSettings(
+        kind=sim.integrator, theta=sim.theta, beta=sim.newmark_beta, gamma=sim.newmark_gamma,
+        flip=sim.flip, tolerance=sim.newton_tolerance, max_iterations=sim.newton_max_iterations,
+        linear_solver=sim.linear_solver)
+    model = Model(
+        dim=dim, lattice=lattice, shape_kind=SHAPE_FUNCTIONS[grid.shape_function],
+        points_per_cell=grid.points_per_cell, bodies=bodies, mass=np.concatenate(masses),
+        vol0=np.concatenate(vols), body_id=np.concatenate(ids), law=np.concatenate(laws),
+        lam=np.concatenate(lams), mu=np.concatenate(mus), gravity=gravity, integrator=settings,
+        constraints=_constraints(case, bodies, dim))
+    state = State(
+        time=0.0, step=0, x=x, v=np.concatenate(vs), a=np.zeros((n, dim)),
+        F=np.tile(np.eye(dim), (n, 1, 1)), sigma=np.zeros((n, 3, 3)),
+        vol=model.vol0.copy(),
+        body_velocity=np.array([np.asarray(cb.velocity, dtype=float) for cb in case.bodies]))
+    return model, state
+
+
+def _constraints(case, bodies: list[BodySpec], dim: int) -> dict[int, list[DirichletBox]]:
+    by_name = {b.name: b.index for b in bodies}
+    out: dict[int, list[DirichletBox]] = {b.index: [] for b in bodies if b.deformable}
+    for bc in getattr(case, "boundary", None) or []:
+        comps = np.array([AXES[j] in bc.components for j in range(dim)])
+        box = DirichletBox(np.asarray(bc.lower, dtype=float), np.asarray(bc.upper, dtype=float),
+                           comps, np.asarray(bc.velocity, dtype=float))
+        unknown = [nm for nm in bc.bodies if nm not in by_name]
+        if unknown:
+            raise CaseError(f"[boundary].bodies = {unknown}: no body of that name; "
+                            f"known bodies: {sorted(by_name)}")
+        targets = [by_name[nm] for nm in bc.bodies] if bc.bodies else list(out)
+        for t in targets:
+            if t in out:
+                out[t].append(box)
+    return out
