@@ -1,0 +1,75 @@
+"""Internal force and consistent tangent (ALGORITHM.md §3): K = −∂f_int/∂u by finite differences."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from softgrains.integrator.assembly import (
+    block_pattern,
+    pair_codes,
+    point_forces_and_tangents,
+    scatter_forces,
+    scatter_tangent,
+)
+from softgrains.materials import lame_parameters
+
+
+@pytest.mark.parametrize("kind", [0, 1], ids=["linear", "bspline2"])
+@pytest.mark.parametrize("law", [0, 1], ids=["neo-hookean", "linear-elastic"])
+def test_tangent_is_derivative_of_internal_force(small_body, kind, law):
+    rng = np.random.default_rng(3)
+    lat, x, v0, box, nodes, N, dN, s = small_body(kind)
+    n = len(x)
+    lam, mu = lame_parameters(1.0e6, 0.3)
+    F_n = np.eye(2) + 0.05 * rng.standard_normal((n, 2, 2))
+    vol_n = v0 * np.linalg.det(F_n)
+    laws = np.full(n, law, dtype=np.int64)
+    lams, mus = np.full(n, lam), np.full(n, mu)
+    active_row = np.full(box.size, -1, dtype=np.int64)
+    touched = np.unique(nodes)
+    active_row[touched] = np.arange(touched.size)
+    u = np.zeros((box.size, 2))
+    u[touched] = 0.01 * lat.h * rng.standard_normal((touched.size, 2))
+    ns = nodes.shape[1]
+    fp = np.empty((n, ns, 2))
+    Kp = np.empty((n, ns, ns, 2, 2))
+
+    def force(u):
+        point_forces_and_tangents(nodes, dN, u, F_n, vol_n, laws, lams, mus, fp, Kp, False)
+        f = np.empty((box.size, 2))
+        scatter_forces(nodes, fp, f)
+        return f[touched].ravel()
+
+    point_forces_and_tangents(nodes, dN, u, F_n, vol_n, laws, lams, mus, fp, Kp, True)
+    indptr, indices, slot, _ = block_pattern(active_row, box.shape, s)
+    data = np.empty((indices.size, 2, 2))
+    scatter_tangent(nodes, Kp, active_row, slot, pair_codes(s, 2), data)
+    K = sp.bsr_matrix((data, indices, indptr), shape=(2 * touched.size,) * 2).toarray()
+    eps = 1e-7 * lat.h
+    cols = rng.choice(2 * touched.size, 12, replace=False)
+    for c in cols:
+        du = np.zeros(2 * touched.size)
+        du[c] = eps
+        up, um = u.copy(), u.copy()
+        up[touched] += du.reshape(-1, 2)
+        um[touched] -= du.reshape(-1, 2)
+        fd = -(force(up) - force(um)) / (2 * eps)
+        assert np.allclose(fd, K[:, c], rtol=1e-5, atol=1e-6 * np.abs(K).max())
+    if law == 0:
+        assert np.allclose(K, K.T, atol=1e-9 * np.abs(K).max())
+
+
+def test_internal_force_of_uniform_stress_sums_to_zero(small_body):
+    """Σ_I f_I = −Σ_p V_p σ_p Σ_I ∇N_I = 0: internal forces cannot move the centre of mass."""
+    rng = np.random.default_rng(4)
+    lat, x, v0, box, nodes, N, dN, s = small_body(0)
+    n = len(x)
+    lam, mu = lame_parameters(1.0e6, 0.3)
+    F_n = np.eye(2) + 0.1 * rng.standard_normal((n, 2, 2))
+    fp = np.empty((n, 4, 2))
+    point_forces_and_tangents(nodes, dN, np.zeros((box.size, 2)), F_n, v0 * np.linalg.det(F_n),
+                              np.zeros(n, dtype=np.int64), np.full(n, lam), np.full(n, mu), fp,
+                              np.empty((n, 4, 4, 2, 2)), False)
+    f = np.empty((box.size, 2))
+    scatter_forces(nodes, fp, f)
+    assert np.abs(f.sum(axis=0)).max() < 1e-10 * np.abs(f).max()
