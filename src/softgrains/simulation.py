@@ -51,8 +51,7 @@ class Simulation:
         self.model, self.state = build(case)
         self.solver = Solver(self.model)
         self.dt = case.simulation.dt
-        self.n_steps = (case.simulation.steps if case.simulation.steps is not None
-                        else int(round(case.simulation.end_time / self.dt)))
+        self.n_steps = case.simulation.n_steps
         self._rows: list[dict[str, object]] = []
         self._gravity_energy0 = 0.0
         self.last_diagnostics = StepDiagnostics()

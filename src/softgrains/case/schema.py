@@ -1,0 +1,404 @@
+"""Pydantic models of a case file, as specified in ``docs/case-schema.md``.
+
+All quantities are SI (m, s, kg, Pa). Every model forbids unknown keys and is strict: a string is
+never turned into a number, but an integer is accepted (and stored as a float) where a float is
+expected. Checks that involve several keys raise :class:`Problems`, which ``softgrains.case.load``
+turns into one message line per offending key.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from typing import Annotated, Literal, NamedTuple
+
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+MAX_POINTS = 2e7
+"""Largest accepted estimated number of material points (all bodies together)."""
+MAX_NODES = 5e7
+"""Largest accepted number of grid nodes."""
+MAX_STEPS = 1e9
+"""Largest accepted number of time steps."""
+AXES = ("x", "y", "z")
+"""Names of the velocity components, in axis order."""
+SHAPE_KEYS: dict[str, tuple[str, ...]] = {
+    "disk": ("center", "radius"),
+    "rectangle": ("lower", "upper"),
+    "polygon": ("vertices",),
+}
+"""The geometry keys each body shape needs (and no other shape may have)."""
+
+MISSING = object()
+"""Stands for the value of a key that is absent."""
+
+
+class Problem(NamedTuple):
+    """One invalid key: its path (relative to the model that found it), its value, what is wrong."""
+
+    loc: tuple[str | int, ...]
+    value: object
+    message: str
+
+
+class Problems(ValueError):
+    """Cross-field check failures, raised from a model validator; one :class:`Problem` per key."""
+
+    def __init__(self, problems: list[Problem]) -> None:
+        super().__init__("; ".join(f"{'.'.join(map(str, p.loc))}: {p.message}" for p in problems))
+        self.problems = problems
+
+
+def _zero_vector() -> list[float]:
+    """The default for vectors; of length 2, the only dimension supported so far."""
+    return [0.0, 0.0]
+
+
+PositiveFloat = Annotated[float, Field(gt=0)]
+
+
+class _Section(BaseModel):
+    """Common configuration: unknown keys are errors, no str -> number coercion, no inf/nan."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False)
+
+
+class SimulationSettings(_Section):
+    """``[simulation]``: time stepping and solver settings."""
+
+    dimension: Literal[2] = Field(2, description="spatial dimension (only 2 for now)")
+    dt: float = Field(gt=0, description="time step [s]")
+    end_time: float | None = Field(None, gt=0, description="simulated time [s]; or give steps")
+    steps: int | None = Field(None, ge=1, le=MAX_STEPS, description="number of time steps")
+    integrator: Literal["theta", "newmark"] = Field("theta", description="time integrator")
+    theta: float = Field(0.5, ge=0.5, le=1.0, description="theta of the Moreau-Jean scheme")
+    newmark_beta: float = Field(0.25, gt=0.0, le=0.5, description="Newmark beta")
+    newmark_gamma: float = Field(0.5, ge=0.5, le=1.0, description="Newmark gamma")
+    flip: float = Field(1.0, ge=0.0, le=1.0, description="FLIP fraction of the FLIP/PIC blend")
+    seed: int = Field(0, ge=0, description="random seed")
+    threads: int = Field(0, ge=0, description="worker threads (0 = all cores)")
+    newton_tolerance: float = Field(1e-8, gt=0.0, lt=1.0, description="relative residual")
+    newton_max_iterations: int = Field(25, ge=1, le=200, description="Newton iteration limit")
+    linear_solver: Literal["auto", "direct", "cg"] = Field("auto", description="linear solver")
+
+    @property
+    def n_steps(self) -> int:
+        """Number of time steps: ``steps``, or ``end_time / dt`` rounded up."""
+        if self.steps is not None:
+            return self.steps
+        assert self.end_time is not None  # guaranteed by validation
+        return max(1, math.ceil(self.end_time / self.dt * (1 - 1e-12)))
+
+    @model_validator(mode="after")
+    def _check_duration(self) -> SimulationSettings:
+        if self.end_time is not None and self.steps is not None:
+            message = f"give either end_time or steps, not both (end_time = {self.end_time:g})"
+            raise Problems([Problem(("steps",), self.steps, message)])
+        if self.end_time is None and self.steps is None:
+            message = "required: give end_time (simulated time, s) or steps"
+            raise Problems([Problem(("end_time",), MISSING, message)])
+        if self.end_time is not None:
+            if self.end_time < self.dt:
+                message = f"must be >= dt = {self.dt:g}"
+                raise Problems([Problem(("end_time",), self.end_time, message)])
+            if self.end_time / self.dt > MAX_STEPS:
+                message = (
+                    f"gives {self.end_time / self.dt:.3g} steps of dt = {self.dt:g}; at most "
+                    f"{MAX_STEPS:.0e} allowed: shorten end_time or raise dt"
+                )
+                raise Problems([Problem(("end_time",), self.end_time, message)])
+        return self
+
+
+class GridSettings(_Section):
+    """``[grid]``: the background grid, a box ``[origin, origin + size]`` of square cells."""
+
+    cell_size: float = Field(gt=0, description="cell size h [m]")
+    origin: list[float] = Field(default_factory=_zero_vector, description="lower corner [m]")
+    size: list[PositiveFloat] = Field(description="extent of the domain per axis [m]")
+    shape_function: Literal["linear", "bspline2"] = Field("linear", description="shape functions")
+    points_per_cell: int = Field(2, ge=1, le=6, description="material points per cell per axis")
+
+    @property
+    def upper(self) -> list[float]:
+        """Upper corner of the domain, ``origin + size`` [m]."""
+        return [o + s for o, s in zip(self.origin, self.size, strict=True)]
+
+    def node_counts(self) -> list[int]:
+        """Grid nodes per axis, ``ceil(size / cell_size) + 1``."""
+        return [math.ceil(s / self.cell_size * (1 - 1e-12)) + 1 for s in self.size]
+
+
+class Material(_Section):
+    """``[materials.NAME]``: a hyperelastic (or linear-elastic) material."""
+
+    law: Literal["neo-hookean", "linear-elastic"] = Field("neo-hookean", description="law")
+    young: float = Field(gt=0, description="Young's modulus [Pa]")
+    poisson: float = Field(gt=-1.0, lt=0.5, description="Poisson's ratio")
+    density: float = Field(gt=0, description="mass density [kg/m^3]")
+
+
+class VelocitySine(_Section):
+    """``[bodies.velocity_sine]``: adds ``amplitude * sin(k . (x - origin))`` to the velocity."""
+
+    amplitude: list[float] = Field(description="velocity amplitude per axis [m/s]")
+    wavenumber: list[float] = Field(description="wave vector k [rad/m]")
+    origin: list[float] = Field(default_factory=_zero_vector, description="phase origin [m]")
+
+
+class Body(_Section):
+    """``[[bodies]]``: one explicit body; only the geometry keys of its ``shape`` are set."""
+
+    name: str = Field("", description='unique name; empty -> "body<index>"')
+    shape: Literal["disk", "rectangle", "polygon"]
+    center: list[float] | None = Field(None, description="disk centre [m]")
+    radius: float | None = Field(None, gt=0, description="disk radius [m]")
+    lower: list[float] | None = Field(None, description="rectangle lower corner [m]")
+    upper: list[float] | None = Field(None, description="rectangle upper corner [m]")
+    vertices: list[list[float]] | None = Field(None, min_length=3, description="polygon [m]")
+    material: str = Field(description="name of a [materials] entry")
+    kind: Literal["deformable", "kinematic"] = Field("deformable", description="body kind")
+    velocity: list[float] = Field(
+        default_factory=_zero_vector,
+        description="initial velocity [m/s] (the prescribed rigid velocity if kinematic)",
+    )
+    velocity_gradient: list[list[float]] | None = Field(
+        None, description="initial velocity gradient L [1/s]: adds L (x - centroid)"
+    )
+    velocity_sine: VelocitySine | None = Field(None, description="initial sine velocity field")
+
+    def area(self) -> float:
+        """Area of the shape [m^2]."""
+        if self.shape == "disk":
+            return math.pi * self.radius * self.radius
+        if self.shape == "rectangle":
+            return math.prod(u - lo for lo, u in zip(self.lower, self.upper, strict=True))
+        return abs(_signed_area(self.vertices))
+
+    def centroid(self) -> list[float]:
+        """Centroid of the shape [m] (a disk's centre): the reference of ``velocity_gradient``."""
+        if self.shape == "disk":
+            return list(self.center)
+        if self.shape == "rectangle":
+            return [(lo + u) / 2 for lo, u in zip(self.lower, self.upper, strict=True)]
+        vertices = self.vertices
+        area = _signed_area(vertices)
+        cx = cy = 0.0
+        for (x0, y0), (x1, y1) in zip(vertices, vertices[1:] + vertices[:1], strict=True):
+            cross = x0 * y1 - x1 * y0
+            cx += (x0 + x1) * cross
+            cy += (y0 + y1) * cross
+        return [cx / (6 * area), cy / (6 * area)]
+
+    def bounds(self) -> tuple[list[float], list[float]]:
+        """Lower and upper corners of the shape's bounding box [m]."""
+        if self.shape == "disk":
+            return [c - self.radius for c in self.center], [c + self.radius for c in self.center]
+        if self.shape == "rectangle":
+            return list(self.lower), list(self.upper)
+        columns = list(zip(*self.vertices, strict=True))
+        return [min(column) for column in columns], [max(column) for column in columns]
+
+    @model_validator(mode="after")
+    def _check_keys(self) -> Body:
+        problems = []
+        for shape, keys in SHAPE_KEYS.items():
+            for key in keys:
+                value = getattr(self, key)
+                if shape == self.shape and value is None:
+                    problems.append(Problem((key,), MISSING, f"required for shape = '{shape}'"))
+                elif shape != self.shape and value is not None:
+                    message = f"only for shape = '{shape}', not '{self.shape}': remove it"
+                    problems.append(Problem((key,), value, message))
+        if self.kind == "kinematic":
+            for key in ("velocity_gradient", "velocity_sine"):
+                value = getattr(self, key)
+                if value is not None:
+                    message = "only for kind = 'deformable' (a kinematic body moves rigidly)"
+                    problems.append(Problem((key,), value, message))
+        if problems:
+            raise Problems(problems)
+        return self
+
+
+class Boundary(_Section):
+    """``[[boundary]]``: prescribed velocity components on the grid nodes inside a box."""
+
+    lower: list[float] = Field(description="lower corner of the box [m] (inclusive)")
+    upper: list[float] = Field(description="upper corner of the box [m] (inclusive)")
+    components: list[Literal["x", "y", "z"]] = Field(min_length=1, description="components")
+    velocity: list[float] = Field(default_factory=_zero_vector, description="velocity [m/s]")
+    bodies: list[str] = Field(
+        default_factory=list, description="bodies it applies to (empty: all deformable bodies)"
+    )
+
+
+class Gravity(_Section):
+    """``[gravity]``: a uniform body acceleration."""
+
+    acceleration: list[float] = Field(default_factory=_zero_vector, description="[m/s^2]")
+
+
+class OutputSettings(_Section):
+    """``[output]``: what is written, and how often."""
+
+    interval: int = Field(10, ge=1, description="steps between rows of series.csv / bodies.csv")
+    snapshot_interval: int = Field(100, ge=0, description="steps between snapshots (0 = none)")
+    progress: bool = Field(True, description="progress bar on a terminal")
+
+
+class Case(_Section):
+    """A whole case file."""
+
+    simulation: SimulationSettings
+    grid: GridSettings
+    materials: dict[str, Material] = Field(min_length=1)
+    bodies: list[Body] = Field(min_length=1)
+    boundary: list[Boundary] = Field(default_factory=list)
+    gravity: Gravity = Field(default_factory=Gravity)
+    output: OutputSettings = Field(default_factory=OutputSettings)
+
+    @model_validator(mode="after")
+    def _check_consistency(self) -> Case:
+        for index, body in enumerate(self.bodies):
+            body.name = body.name or f"body{index}"
+        problems = self._length_problems()
+        if not problems:  # the other checks rely on vectors of the right length
+            problems = self._reference_problems() + self._geometry_problems()
+            problems += self._size_problems()
+        if problems:
+            raise Problems(problems)
+        return self
+
+    def _length_problems(self) -> list[Problem]:
+        """Every vector must have one entry per axis (every matrix one row per axis)."""
+        vectors: dict[tuple[str | int, ...], list | None] = {
+            ("grid", "origin"): self.grid.origin,
+            ("grid", "size"): self.grid.size,
+            ("gravity", "acceleration"): self.gravity.acceleration,
+        }
+        for i, body in enumerate(self.bodies):
+            for key in ("center", "lower", "upper", "velocity", "velocity_gradient"):
+                vectors["bodies", i, key] = getattr(body, key)
+            for key in ("vertices", "velocity_gradient"):
+                for j, row in enumerate(getattr(body, key) or []):
+                    vectors["bodies", i, key, j] = row
+            if body.velocity_sine is not None:
+                for key in ("amplitude", "wavenumber", "origin"):
+                    vectors["bodies", i, "velocity_sine", key] = getattr(body.velocity_sine, key)
+        for i, condition in enumerate(self.boundary):
+            for key in ("lower", "upper", "velocity"):
+                vectors["boundary", i, key] = getattr(condition, key)
+        dim = self.simulation.dimension
+        return [
+            Problem(loc, vector, f"must have {dim} entries (one per axis), not {len(vector)}")
+            for loc, vector in vectors.items()
+            if vector is not None and len(vector) != dim
+        ]
+
+    def _reference_problems(self) -> list[Problem]:
+        """Materials and bodies named elsewhere must exist; names and components be unique."""
+        problems = []
+        names = [body.name for body in self.bodies]
+        for i, body in enumerate(self.bodies):
+            if body.material not in self.materials:
+                message = "no such material" + suggest(body.material, list(self.materials))
+                problems.append(Problem(("bodies", i, "material"), body.material, message))
+            if body.name in names[:i]:
+                problems.append(Problem(("bodies", i, "name"), body.name, "duplicate body name"))
+        axes = AXES[: self.simulation.dimension]
+        for i, condition in enumerate(self.boundary):
+            components = condition.components
+            if not set(components) <= set(axes) or len(set(components)) != len(components):
+                message = f"must be distinct entries of {list(axes)}"
+                problems.append(Problem(("boundary", i, "components"), components, message))
+            for j, name in enumerate(condition.bodies):
+                if name not in names:
+                    message = "no such body" + suggest(name, names)
+                    problems.append(Problem(("boundary", i, "bodies", j), name, message))
+        return problems
+
+    def _geometry_problems(self) -> list[Problem]:
+        """Shapes must be proper and lie inside the grid domain; boundary boxes not be inverted."""
+        problems = []
+        for i, body in enumerate(self.bodies):
+            problems += [
+                Problem(("bodies", i, *loc), value, message)
+                for loc, value, message in self._shape_problems(body)
+            ]
+        for i, condition in enumerate(self.boundary):
+            if any(u < lo for lo, u in zip(condition.lower, condition.upper, strict=True)):
+                message = f"each entry must be >= lower = [{_vector(condition.lower)}]"
+                problems.append(Problem(("boundary", i, "upper"), condition.upper, message))
+        return problems
+
+    def _shape_problems(self, body: Body) -> list[Problem]:
+        """A rectangle must not be inverted, a polygon not be flat, no shape leave the domain."""
+        if body.shape == "rectangle" and any(
+            u <= lo for lo, u in zip(body.lower, body.upper, strict=True)
+        ):
+            message = f"each entry must be > lower = [{_vector(body.lower)}]"
+            return [Problem(("upper",), body.upper, message)]
+        if body.shape == "polygon" and _signed_area(body.vertices) == 0:
+            message = "the polygon has zero area: give at least 3 non-collinear vertices"
+            return [Problem(("vertices",), body.vertices, message)]
+        lower, upper = body.bounds()
+        below = any(b < d for b, d in zip(lower, self.grid.origin, strict=True))
+        above = any(b > d for b, d in zip(upper, self.grid.upper, strict=True))
+        if not (below or above):
+            return []
+        rectangle_key = "lower" if below else "upper"
+        key = {"disk": "center", "rectangle": rectangle_key, "polygon": "vertices"}[body.shape]
+        message = (
+            f"the {body.shape} reaches from [{_vector(lower)}] to [{_vector(upper)}], outside the "
+            f"grid domain from [{_vector(self.grid.origin)}] to [{_vector(self.grid.upper)}]: "
+            "move it or change grid.origin / grid.size"
+        )
+        return [Problem((key,), getattr(body, key), message)]
+
+    def _size_problems(self) -> list[Problem]:
+        """The run must fit: bounded numbers of grid nodes and material points."""
+        problems = []
+        grid = self.grid
+        nodes = math.prod(s / grid.cell_size + 1 for s in grid.size)
+        if nodes > MAX_NODES:
+            message = (
+                f"too many grid nodes: about {nodes:.3g}, at most {MAX_NODES:.0e} allowed: "
+                "use a larger cell_size or a smaller grid.size"
+            )
+            problems.append(Problem(("grid", "cell_size"), grid.cell_size, message))
+        points = sum(estimate_points(body, grid) for body in self.bodies)
+        if points > MAX_POINTS:
+            message = (
+                f"too many points: about {points:.3g} material points estimated, at most "
+                f"{MAX_POINTS:.0e} allowed: use a larger cell_size or fewer points_per_cell"
+            )
+            problems.append(Problem(("grid", "cell_size"), grid.cell_size, message))
+        return problems
+
+
+def estimate_points(body: Body, grid: GridSettings) -> float:
+    """Estimated number of material points of ``body``: its area / (h / points_per_cell)^2."""
+    points_per_length = grid.points_per_cell / grid.cell_size
+    return body.area() * math.prod(points_per_length for _ in grid.size)
+
+
+def _signed_area(vertices: list[list[float]]) -> float:
+    """Signed area of a polygon (shoelace formula), positive when counter-clockwise."""
+    pairs = zip(vertices, vertices[1:] + vertices[:1], strict=True)
+    return 0.5 * sum(x0 * y1 - x1 * y0 for (x0, y0), (x1, y1) in pairs)
+
+
+def _vector(values: list[float]) -> str:
+    """``1, 0.5`` for ``[1.0, 0.5]``: compact coordinates for messages."""
+    return ", ".join(f"{v:g}" for v in values)
+
+
+def suggest(name: str, choices: list[str]) -> str:
+    """``"; did you mean 'x'?"`` for a close choice, else ``"; expected one of 'a', 'b'"``."""
+    close = difflib.get_close_matches(name, choices, n=1)
+    if not choices:
+        return ""
+    if close:
+        return f"; did you mean '{close[0]}'?"
+    return "; expected one of " + ", ".join(f"'{choice}'" for choice in choices)
