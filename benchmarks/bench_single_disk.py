@@ -18,6 +18,7 @@ import numba
 import numpy as np
 
 from softgrains.case import load_case
+from softgrains.errors import SimulationError
 from softgrains.simulation import Simulation
 
 D = 1.0e-3
@@ -70,7 +71,11 @@ def main() -> None:
     for n in args.sizes:
         for dt in args.dts:
             for solver in args.solvers:
-                r = measure(n, dt, solver, args.steps)
+                try:
+                    r = measure(n, dt, solver, args.steps)
+                except SimulationError as err:
+                    print(f"{n:>4} {dt:>8.1e} {solver:>7}  failed: {err}", flush=True)
+                    continue
                 print(f"{r['D/h']:>4} {r['dt']:>8.1e} {r['solver']:>7} {r['used']:>10} "
                       f"{r['points']:>7} {r['ms/step']:>9.2f} {r['newton/step']:>7.2f} "
                       f"{r['Mpts/s']:>7.3f}", flush=True)

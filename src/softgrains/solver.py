@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from softgrains.integrator.implicit import BodyPoints, BodyStepper, BodyStepResult
 from softgrains.model import Model, State
@@ -32,6 +33,9 @@ class Solver:
 
     def __init__(self, model: Model) -> None:
         self.model = model
+        # Our BLAS calls are small vector operations; a multi-threaded BLAS spinning beside the
+        # Numba threads slowed a 20k-point step five-fold (docs/dev-notes.md).
+        self._blas_limit = threadpool_limits(limits=1, user_api="blas")
         self.steppers = {
             b.index: BodyStepper(b.name, model.lattice, model.shape_kind, model.integrator,
                                  model.constraints.get(b.index, []))

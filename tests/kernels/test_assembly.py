@@ -6,10 +6,11 @@ import scipy.sparse as sp
 
 from softgrains.integrator.assembly import (
     block_pattern,
+    gather_forces,
+    gather_tangent,
+    node_point_map,
     pair_codes,
-    point_forces_and_tangents,
-    scatter_forces,
-    scatter_tangent,
+    point_stresses,
 )
 from softgrains.materials import lame_parameters
 
@@ -30,20 +31,20 @@ def test_tangent_is_derivative_of_internal_force(small_body, kind, law):
     active_row[touched] = np.arange(touched.size)
     u = np.zeros((box.size, 2))
     u[touched] = 0.01 * lat.h * rng.standard_normal((touched.size, 2))
-    ns = nodes.shape[1]
-    fp = np.empty((n, ns, 2))
-    Kp = np.empty((n, ns, ns, 2, 2))
+    Pv = np.empty((n, 2, 2))
+    Av = np.empty((n, 2, 2, 2, 2))
+    ptr, entries = node_point_map(nodes, active_row, touched.size)
 
     def force(u):
-        point_forces_and_tangents(nodes, dN, u, F_n, vol_n, laws, lams, mus, fp, Kp, False)
-        f = np.empty((box.size, 2))
-        scatter_forces(nodes, fp, f)
-        return f[touched].ravel()
+        point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, False, 4)
+        f = np.empty((touched.size, 2))
+        gather_forces(ptr, entries, dN, Pv, f)
+        return f.ravel()
 
-    point_forces_and_tangents(nodes, dN, u, F_n, vol_n, laws, lams, mus, fp, Kp, True)
+    point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, True, 4)
     indptr, indices, slot, _ = block_pattern(active_row, box.shape, s)
     data = np.empty((indices.size, 2, 2))
-    scatter_tangent(nodes, Kp, active_row, slot, pair_codes(s, 2), data)
+    gather_tangent(ptr, entries, dN, Av, slot, pair_codes(s, 2), data)
     K = sp.bsr_matrix((data, indices, indptr), shape=(2 * touched.size,) * 2).toarray()
     eps = 1e-7 * lat.h
     cols = rng.choice(2 * touched.size, 12, replace=False)
@@ -66,10 +67,12 @@ def test_internal_force_of_uniform_stress_sums_to_zero(small_body):
     n = len(x)
     lam, mu = lame_parameters(1.0e6, 0.3)
     F_n = np.eye(2) + 0.1 * rng.standard_normal((n, 2, 2))
-    fp = np.empty((n, 4, 2))
-    point_forces_and_tangents(nodes, dN, np.zeros((box.size, 2)), F_n, v0 * np.linalg.det(F_n),
-                              np.zeros(n, dtype=np.int64), np.full(n, lam), np.full(n, mu), fp,
-                              np.empty((n, 4, 4, 2, 2)), False)
+    Pv = np.empty((n, 2, 2))
+    point_stresses(nodes, dN, np.zeros((box.size, 2)), F_n, v0 * np.linalg.det(F_n),
+                   np.zeros(n, dtype=np.int64), np.full(n, lam), np.full(n, mu), Pv,
+                   np.empty((n, 2, 2, 2, 2)), False, 4)
+    active_row = np.arange(box.size)
+    ptr, entries = node_point_map(nodes, active_row, box.size)
     f = np.empty((box.size, 2))
-    scatter_forces(nodes, fp, f)
+    gather_forces(ptr, entries, dN, Pv, f)
     assert np.abs(f.sum(axis=0)).max() < 1e-10 * np.abs(f).max()

@@ -22,7 +22,7 @@ def _update(small_body, kind, nodal_map):
     xp = x.copy()
     grid_to_particles(nodes, N, dN, u, zeros, zeros, zeros, 1.0, False,
                       np.zeros(n, dtype=np.int64), np.full(n, lam), np.full(n, mu),
-                      np.full(n, v0), xp, v, np.zeros((n, 2)), F, sigma, vol)
+                      np.full(n, v0), xp, v, np.zeros((n, 2)), F, sigma, vol, 4)
     return x, xp, F, sigma, vol, v0, mu
 
 

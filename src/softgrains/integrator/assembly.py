@@ -12,13 +12,16 @@ gradients,
 
 The tangent is stored block-sparse (BSR, d×d blocks) over the body's active nodes; its
 pattern links active nodes within the stencil reach (|ΔI_j| ≤ s − 1). Per-point terms are
-computed in parallel, then scattered serially into the fixed pattern (no write conflicts).
+computed in parallel over points (V^n P̃ and V^n Ã), then gathered in parallel over the rows
+of the fixed pattern through a node → points map (no write conflicts, no per-pair storage).
 """
 
 import numpy as np
 from numba import njit, prange
 
+from softgrains.grid.transfers import deformation_increment, matmul
 from softgrains.materials.dispatch import pk1_and_tangent
+from softgrains.materials.tensor import determinant
 
 
 @njit(cache=True)
@@ -101,107 +104,133 @@ def block_pattern(active_row, box_shape, s):
 
 
 @njit(cache=True, parallel=True)
-def point_forces_and_tangents(nodes, dN, u_I, F_n, vol_n, law, lam, mu, fp, Kp, want_tangent):
-    """Per-point internal-force terms fp (n, ns, d) and tangent blocks Kp (n, ns, ns, d, d).
+def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangent, n_chunks):
+    """Per point: Pv = V^n P̃ (d×d) and, if ``want_tangent``, Av = V^n Ã (d×d×d×d).
 
-    Returns the smallest J of the trial state (≤ 0: the trial state inverts a point).
+    Points are processed in ``n_chunks`` chunks (a few per thread), each with its own
+    scratch arrays (no allocation per point). Returns the smallest J of the trial state
+    (≤ 0: the trial state inverts a point; that point's Pv and Av are then left unset).
     """
-    n, ns = nodes.shape
+    n = nodes.shape[0]
     d = u_I.shape[1]
-    Jtrial = np.empty(n)
-    for p in prange(n):
-        dF = np.eye(d)
-        for k in range(ns):
-            I = nodes[p, k]
+    n_chunks = max(1, min(n, n_chunks))
+    Jmin_chunk = np.empty(n_chunks)
+    for c in prange(n_chunks):
+        dF = np.empty((d, d))
+        F = np.empty((d, d))
+        P = np.empty((d, d))
+        Finv = np.empty((d, d))
+        Fn = np.empty((d, d))
+        A = np.empty((d, d, d, d))
+        jmin = np.inf
+        for p in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            deformation_increment(nodes, dN, p, u_I, dF)
             for i in range(d):
                 for j in range(d):
-                    dF[i, j] += u_I[I, i] * dN[p, k, j]
-        Fn = F_n[p]
-        F = dF @ Fn
-        P = np.empty((d, d))
-        A = np.empty((d, d, d, d))
-        J = pk1_and_tangent(law[p], F, lam[p], mu[p], P, A)
-        Jtrial[p] = J
-        if J <= 0.0:
-            fp[p] = 0.0
-            if want_tangent:
-                Kp[p] = 0.0
-            continue
-        Jn = Fn[0, 0] * Fn[1, 1] - Fn[0, 1] * Fn[1, 0] if d == 2 else np.linalg.det(Fn)
-        scale = vol_n[p] / Jn
-        # P_rel = P Fnᵀ / Jn, folded with V^n into `scale`
-        Prel = P @ Fn.T
-        for k in range(ns):
+                    Fn[i, j] = F_n[p, i, j]
+            matmul(dF, Fn, F)
+            J = pk1_and_tangent(law[p], F, lam[p], mu[p], P, A, Finv, want_tangent)
+            jmin = min(jmin, J)
+            if J <= 0.0:
+                continue
+            scale = vol_n[p] / determinant(Fn)
+            # V^n P̃ = (V^n/J^n) P Fnᵀ
             for i in range(d):
-                acc = 0.0
                 for a in range(d):
-                    acc += Prel[i, a] * dN[p, k, a]
-                fp[p, k, i] = -scale * acc
-        if not want_tangent:
-            continue
-        # Ã_iakb (times J^n) = Σ_MN A_iMkN Fn_aM Fn_bN ; then contract with ∇N on a and b
-        At = np.zeros((d, d, d, d))
+                    acc = 0.0
+                    for M in range(d):
+                        acc += P[i, M] * Fn[a, M]
+                    Pv[p, i, a] = scale * acc
+            if not want_tangent:
+                continue
+            # V^n Ã_iakb = (V^n/J^n) Σ_MN A_iMkN Fn_aM Fn_bN
+            for i in range(d):
+                for k in range(d):
+                    for a in range(d):
+                        for b in range(d):
+                            acc = 0.0
+                            for M in range(d):
+                                for N_ in range(d):
+                                    acc += A[i, M, k, N_] * Fn[a, M] * Fn[b, N_]
+                            Av[p, i, a, k, b] = scale * acc
+        Jmin_chunk[c] = jmin
+    return Jmin_chunk.min()
+
+
+@njit(cache=True)
+def node_point_map(nodes, active_row, n_rows):
+    """For every active row, the stencil entries (p·ns + k) of the points that touch it.
+
+    Returns (ptr, entries) in CSR form, so that rows can be assembled in parallel.
+    """
+    n, ns = nodes.shape
+    ptr = np.zeros(n_rows + 1, dtype=np.int64)
+    for p in range(n):
+        for k in range(ns):
+            r = active_row[nodes[p, k]]
+            if r >= 0:
+                ptr[r + 1] += 1
+    for r in range(n_rows):
+        ptr[r + 1] += ptr[r]
+    fill = ptr[:-1].copy()
+    entries = np.empty(ptr[n_rows], dtype=np.int64)
+    for p in range(n):
+        for k in range(ns):
+            r = active_row[nodes[p, k]]
+            if r >= 0:
+                entries[fill[r]] = p * ns + k
+                fill[r] += 1
+    return ptr, entries
+
+
+@njit(cache=True, parallel=True)
+def gather_forces(ptr, entries, dN, Pv, f):
+    """f_r = −Σ_{(p,k) at r} (V^n P̃_p) ∇N_k(X_p), row-parallel (f: (n_rows, d))."""
+    n_rows, d = f.shape
+    ns = dN.shape[1]
+    for r in prange(n_rows):
         for i in range(d):
-            for k in range(d):
+            acc = 0.0
+            for q in range(ptr[r], ptr[r + 1]):
+                p = entries[q] // ns
+                k = entries[q] % ns
                 for a in range(d):
-                    for b in range(d):
-                        acc = 0.0
-                        for M in range(d):
-                            for N_ in range(d):
-                                acc += A[i, M, k, N_] * Fn[a, M] * Fn[b, N_]
-                        At[i, a, k, b] = acc
-        for ka in range(ns):
+                    acc += Pv[p, i, a] * dN[p, k, a]
+            f[r, i] = -acc
+
+
+@njit(cache=True, parallel=True)
+def gather_tangent(ptr, entries, dN, Av, slot, codes, data):
+    """BSR data (nnzb, d, d) of K: block (r, c) = Σ_p ∇N_a · (V^n Ã_p) · ∇N_b, row-parallel.
+
+    Terms that touch an inactive node (mass below the activity threshold) are dropped: such a
+    node carries no unknown (its displacement is zero).
+    """
+    n_rows = ptr.shape[0] - 1
+    d = data.shape[1]
+    ns = dN.shape[1]
+    for r in prange(n_rows):
+        for c in range(slot.shape[1]):
+            q = slot[r, c]
+            if q >= 0:
+                for i in range(d):
+                    for k in range(d):
+                        data[q, i, k] = 0.0
+        for e in range(ptr[r], ptr[r + 1]):
+            p = entries[e] // ns
+            ka = entries[e] % ns
             for kb in range(ns):
+                q = slot[r, codes[ka, kb]]
+                if q < 0:  # column node inactive
+                    continue
                 for i in range(d):
                     for k in range(d):
                         acc = 0.0
                         for a in range(d):
                             ga = dN[p, ka, a]
                             for b in range(d):
-                                acc += ga * At[i, a, k, b] * dN[p, kb, b]
-                        Kp[p, ka, kb, i, k] = scale * acc
-    Jmin = np.inf
-    for p in range(n):
-        if Jtrial[p] < Jmin:
-            Jmin = Jtrial[p]
-    return Jmin
-
-
-@njit(cache=True)
-def scatter_forces(nodes, fp, f_I):
-    """f_I (n_box, d) = Σ_p fp (serial: no write conflicts)."""
-    n, ns = nodes.shape
-    d = f_I.shape[1]
-    f_I[:, :] = 0.0
-    for p in range(n):
-        for k in range(ns):
-            I = nodes[p, k]
-            for i in range(d):
-                f_I[I, i] += fp[p, k, i]
-
-
-@njit(cache=True)
-def scatter_tangent(nodes, Kp, active_row, slot, codes, data):
-    """Accumulate per-point tangent blocks into the BSR data array (nnzb, d, d).
-
-    Terms that touch an inactive node (mass below the activity threshold) are dropped: such a
-    node carries no unknown (its displacement is zero).
-    """
-    n, ns = nodes.shape
-    d = data.shape[1]
-    data[:, :, :] = 0.0
-    for p in range(n):
-        for ka in range(ns):
-            r = active_row[nodes[p, ka]]
-            if r < 0:
-                continue
-            for kb in range(ns):
-                q = slot[r, codes[ka, kb]]
-                if q < 0:
-                    continue
-                for i in range(d):
-                    for k in range(d):
-                        data[q, i, k] += Kp[p, ka, kb, i, k]
+                                acc += ga * Av[p, i, a, k, b] * dN[p, kb, b]
+                        data[q, i, k] += acc
 
 
 @njit(cache=True)

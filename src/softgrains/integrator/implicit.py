@@ -8,7 +8,8 @@ Newmark (β, γ; trapezoidal rule for β = 1/4, γ = 1/2), force units:
     R(u) = M a^{n+1} − F^{n+1}(u) − P/(γΔt),              dR/du = M/(βΔt²) + K_T
 F = f^int + f^ext (f^ext = M g). Newton stops when ‖R‖ ≤ max(tol ‖R_0‖, floor), with the floor
 the residual of a displacement error of 1e-10 h at every node: floor = 1e-10 h c_m ‖M‖
-(c_m = 1/(θΔt) or 1/(βΔt²)). Dirichlet dofs carry their prescribed velocity (u = Δt v̄).
+(c_m = 1/(θΔt) or 1/(βΔt²)). Dirichlet dofs carry their prescribed velocity (u = Δt v̄). A Newton update that would invert
+a point (J ≤ 0) is halved, up to MAX_STEP_HALVINGS times.
 Contact impulses P are zero until the contact issue adds them.
 """
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
@@ -26,15 +28,18 @@ from softgrains.grid.transfers import grid_to_particles, local_node_indices, par
 from softgrains.integrator.assembly import (
     add_diagonal_and_constrain,
     block_pattern,
+    gather_forces,
+    gather_tangent,
+    node_point_map,
     pair_codes,
-    point_forces_and_tangents,
-    scatter_forces,
-    scatter_tangent,
+    point_stresses,
 )
 from softgrains.integrator.linear_solvers import LinearSolver
 
 ACTIVE_MASS_FRACTION = 1e-12
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
+CHUNKS_PER_THREAD = 8  # point chunks per thread in the parallel kernels
+MAX_STEP_HALVINGS = 8  # backtracking of a Newton update that inverts a point
 
 
 @dataclass(frozen=True)
@@ -163,21 +168,27 @@ class BodyStepper:
         f_ext = m * gravity
 
         indptr, indices, slot, diag_slot = block_pattern(active_row, box.shape, self.s)
-        n_pts, ns = nodes.shape
-        fp = np.empty((n_pts, ns, d))
-        Kp = np.empty((n_pts, ns, ns, d, d))
+        ptr, entries = node_point_map(nodes, active_row, active.size)
+        n_pts = nodes.shape[0]
+        n_chunks = CHUNKS_PER_THREAD * numba.get_num_threads()
+        Pv = np.empty((n_pts, d, d))
+        Av = np.empty((n_pts, d, d, d, d))
         data = np.empty((indices.size, d, d))
-        f_box = np.empty((n_box, d))
+        f_int = np.empty((active.size, d))
         u_box = np.zeros((n_box, d))
         F_n = pts.F.copy()
         vol_n = pts.vol.copy()
 
         def internal_force(u, want_tangent):
+            """f^int(u) on the active nodes (and K in `data` if want_tangent); min J."""
             u_box[active] = u
-            jmin = point_forces_and_tangents(nodes, dN, u_box, F_n, vol_n, pts.law, pts.lam,
-                                             pts.mu, fp, Kp, want_tangent)
-            scatter_forces(nodes, fp, f_box)
-            return f_box[active].copy(), jmin
+            jmin = point_stresses(nodes, dN, u_box, F_n, vol_n, pts.law, pts.lam, pts.mu,
+                                  Pv, Av, want_tangent, n_chunks)
+            if jmin > 0.0:
+                gather_forces(ptr, entries, dN, Pv, f_int)
+                if want_tangent:
+                    gather_tangent(ptr, entries, dN, Av, slot, self.codes, data)
+            return f_int.copy(), jmin
 
         f_int_n, _ = internal_force(np.zeros_like(v_n), False)
         if newmark:
@@ -205,8 +216,17 @@ class BodyStepper:
         k_scale = 1.0 if newmark else st.theta * dt
         result = BodyStepResult(iterations=0)
         r0 = None
+        du = None
+        halvings = 0
         while True:
             f_int, jmin = internal_force(u, False)
+            if jmin <= 0.0 and du is not None and halvings < MAX_STEP_HALVINGS:
+                # the Newton update inverts a point: backtrack along it
+                du *= 0.5
+                u = u - du
+                halvings += 1
+                continue
+            halvings = 0
             r = residual(u, f_int)
             rnorm = float(np.linalg.norm(r))
             if not np.isfinite(rnorm) or jmin <= 0.0:
@@ -228,13 +248,18 @@ class BodyStepper:
                     "newton_tolerance.",
                     step=step, body=self.name, residuals=result.residuals)
             internal_force(u, True)
-            scatter_tangent(nodes, Kp, active_row, slot, self.codes, data)
             if k_scale != 1.0:
                 data *= k_scale
             add_diagonal_and_constrain(data, indptr, indices, diag_slot, diag, fixed_flat)
             A = sp.bsr_matrix((data, indices, indptr), shape=(diag.size, diag.size))
-            du = self.solver.solve(A, -r.ravel(), diag_slot)
-            u = u + du.reshape(u.shape)
+            try:
+                du = self.solver.solve(A, -r.ravel(), diag_slot).reshape(u.shape)
+            except (np.linalg.LinAlgError, RuntimeError) as err:
+                raise SimulationError(
+                    f"step {step}: linear solve of body '{self.name}' failed at Newton "
+                    f"iteration {result.iterations}: {err}", step=step, body=self.name,
+                    residuals=result.residuals) from err
+            u = u + du
             result.iterations += 1
             result.linear_method = self.solver.last_method
             result.linear_iterations += self.solver.last_iterations
@@ -255,7 +280,7 @@ class BodyStepper:
         a_new[active] = a1
         jmin = grid_to_particles(nodes, N, dN, u_box, v_old, v_new, a_new, st.flip, newmark,
                                  pts.law, pts.lam, pts.mu, pts.vol0, pts.x, pts.v, pts.a,
-                                 pts.F, pts.sigma, pts.vol)
+                                 pts.F, pts.sigma, pts.vol, n_chunks)
         if jmin <= 0.0:
             raise SimulationError(
                 f"step {step}: body '{self.name}' has an inverted point (J = {jmin:.3e}); "

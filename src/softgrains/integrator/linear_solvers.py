@@ -15,7 +15,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 CG_MAX_ITERATIONS = 200
-CG_RELATIVE_TOLERANCE = 1e-12
+CG_RELATIVE_TOLERANCE = 1e-10
 
 
 def _block_jacobi(A: sp.bsr_matrix, diag_slot: np.ndarray) -> sp.bsr_matrix:

@@ -4,7 +4,6 @@ Kernels carry one int per point (``law``), so every body can have its own law wi
 Python objects in the hot loops.
 """
 
-import numpy as np
 from numba import njit
 
 from softgrains.materials import linear_elastic, neo_hookean
@@ -24,15 +23,18 @@ def lame_parameters(young: float, poisson: float) -> tuple[float, float]:
     return lam, mu
 
 
-@njit(cache=True)
-def pk1_and_tangent(law, F, lam, mu, P, A):
-    """P(F) and A = dP/dF for the law; returns J = det F (≤ 0 flags an inverted point)."""
+@njit(cache=True, inline="always")
+def pk1_and_tangent(law, F, lam, mu, P, A, Finv, tangent=True):
+    """P(F) and (if ``tangent``) A = dP/dF; returns J = det F (≤ 0 flags an inverted point).
+
+    P (d×d), A (d×d×d×d) and the scratch Finv (d×d) are filled in place (no allocation).
+    """
     if law == 1:
-        return linear_elastic.pk1_and_tangent(F, lam, mu, P, A)
-    return neo_hookean.pk1_and_tangent(F, lam, mu, P, A)
+        return linear_elastic.pk1_and_tangent(F, lam, mu, P, A, Finv, tangent)
+    return neo_hookean.pk1_and_tangent(F, lam, mu, P, A, Finv, tangent)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def strain_energy(law, F, lam, mu):
     """Strain energy density W(F) per unit reference volume."""
     if law == 1:
@@ -40,13 +42,14 @@ def strain_energy(law, F, lam, mu):
     return neo_hookean.strain_energy(F, lam, mu)
 
 
-@njit(cache=True)
-def cauchy_stress(law, F, lam, mu, sigma):
-    """Fill sigma (3×3 in 2D plane strain: in-plane block and σ_zz; d×d in 3D)."""
+@njit(cache=True, inline="always")
+def cauchy_stress(law, F, lam, mu, sigma, P, A, Finv):
+    """Fill sigma (3×3 in 2D plane strain: in-plane block and σ_zz; d×d in 3D).
+
+    P, A and Finv are scratch arrays as in :func:`pk1_and_tangent`.
+    """
     d = F.shape[0]
-    P = np.empty((d, d))
-    A = np.empty((d, d, d, d))
-    J = pk1_and_tangent(law, F, lam, mu, P, A)
+    J = pk1_and_tangent(law, F, lam, mu, P, A, Finv, False)
     sigma[:, :] = 0.0
     if law == 1:
         for i in range(d):

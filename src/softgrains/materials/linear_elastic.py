@@ -6,13 +6,14 @@
     Plane strain: σ_zz = λ tr ε = ν (σ_xx + σ_yy).
 """
 
-import numpy as np
 from numba import njit
 
+from softgrains.materials.tensor import determinant
 
-@njit(cache=True)
-def pk1_and_tangent(F, lam, mu, P, A):
-    """Fill P = σ(ε(F)) and A = C; return det F (for the volume update)."""
+
+@njit(cache=True, inline="always")
+def pk1_and_tangent(F, lam, mu, P, A, Finv, tangent):
+    """Fill P = σ(ε(F)) and, if ``tangent``, A = C; return det F. Finv is unused."""
     d = F.shape[0]
     tr = 0.0
     for i in range(d):
@@ -25,6 +26,8 @@ def pk1_and_tangent(F, lam, mu, P, A):
             P[i, a] = 2.0 * mu * eps
             if i == a:
                 P[i, a] += lam * tr
+    if not tangent:
+        return determinant(F)
     for i in range(d):
         for a in range(d):
             for k in range(d):
@@ -37,10 +40,10 @@ def pk1_and_tangent(F, lam, mu, P, A):
                     if i == b and a == k:
                         val += mu
                     A[i, a, k, b] = val
-    return np.linalg.det(F)
+    return determinant(F)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def strain_energy(F, lam, mu):
     """W = ½ λ (tr ε)² + μ ε:ε per unit reference volume."""
     d = F.shape[0]
@@ -56,7 +59,7 @@ def strain_energy(F, lam, mu):
     return 0.5 * lam * tr * tr + mu * ee
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def out_of_plane_stress(F, lam, mu):
     """σ_zz = λ tr ε in plane strain."""
     d = F.shape[0]

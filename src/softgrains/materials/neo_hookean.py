@@ -12,26 +12,17 @@ are the plane-strain ones (tr C − 2 in W).
 import numpy as np
 from numba import njit
 
+from softgrains.materials.tensor import determinant, inverse
+
 
 @njit(cache=True, inline="always")
-def _inverse(F):
-    d = F.shape[0]
-    if d == 2:
-        det = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
-        inv = np.empty((2, 2))
-        inv[0, 0] = F[1, 1] / det
-        inv[0, 1] = -F[0, 1] / det
-        inv[1, 0] = -F[1, 0] / det
-        inv[1, 1] = F[0, 0] / det
-        return inv, det
-    return np.linalg.inv(F), np.linalg.det(F)
+def pk1_and_tangent(F, lam, mu, P, A, Finv, tangent):
+    """Fill P (d×d) and, if ``tangent``, A (d×d×d×d) for deformation gradient F; return J.
 
-
-@njit(cache=True)
-def pk1_and_tangent(F, lam, mu, P, A):
-    """Fill P (d×d) and A (d×d×d×d) for deformation gradient F; return J."""
+    ``Finv`` is d×d scratch (receives F⁻¹), so that the function allocates nothing.
+    """
     d = F.shape[0]
-    Finv, J = _inverse(F)
+    J = inverse(F, Finv)
     if J <= 0.0:
         return J
     lnJ = np.log(J)
@@ -39,6 +30,8 @@ def pk1_and_tangent(F, lam, mu, P, A):
     for i in range(d):
         for a in range(d):
             P[i, a] = mu * F[i, a] + c * Finv[a, i]
+    if not tangent:
+        return J
     for i in range(d):
         for a in range(d):
             for k in range(d):
@@ -50,11 +43,11 @@ def pk1_and_tangent(F, lam, mu, P, A):
     return J
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def strain_energy(F, lam, mu):
     """W(F) per unit reference volume (plane strain in 2D)."""
     d = F.shape[0]
-    _, J = _inverse(F)
+    J = determinant(F)
     if J <= 0.0:
         return np.inf
     trC = 0.0
@@ -65,8 +58,8 @@ def strain_energy(F, lam, mu):
     return 0.5 * mu * (trC - d) - mu * lnJ + 0.5 * lam * lnJ * lnJ
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def out_of_plane_stress(F, lam, mu):
     """σ_zz = λ ln J / J in plane strain."""
-    _, J = _inverse(F)
+    J = determinant(F)
     return lam * np.log(J) / J
