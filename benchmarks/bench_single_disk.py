@@ -10,6 +10,7 @@ memory (max RSS of the process) and threads. Run:  python benchmarks/bench_singl
 from __future__ import annotations
 
 import argparse
+import itertools
 import platform
 import resource
 import time
@@ -24,10 +25,10 @@ from softgrains.simulation import Simulation
 D = 1.0e-3
 
 
-def disk_case(d_over_h: int, dt: float, solver: str, steps: int) -> dict:
+def disk_case(d_over_h: int, dt: float, solver: str, steps: int, mass: str = "lumped") -> dict:
     h = D / d_over_h
     return {
-        "simulation": {"dt": dt, "steps": steps, "linear_solver": solver},
+        "simulation": {"dt": dt, "steps": steps, "linear_solver": solver, "mass_matrix": mass},
         "grid": {"cell_size": h, "origin": [0.0, 0.0], "size": [2 * D, 2 * D]},
         "materials": {"gel": {"law": "neo-hookean", "young": 1.0e7, "poisson": 0.4,
                               "density": 1000.0}},
@@ -37,8 +38,9 @@ def disk_case(d_over_h: int, dt: float, solver: str, steps: int) -> dict:
     }
 
 
-def measure(d_over_h: int, dt: float, solver: str, steps: int, warmup: int = 3) -> dict:
-    sim = Simulation(load_case(disk_case(d_over_h, dt, solver, steps + warmup)))
+def measure(d_over_h: int, dt: float, solver: str, mass: str, steps: int,
+            warmup: int = 3) -> dict:
+    sim = Simulation(load_case(disk_case(d_over_h, dt, solver, steps + warmup, mass)))
     for _ in range(warmup):
         sim.step()
     iters = 0
@@ -50,7 +52,8 @@ def measure(d_over_h: int, dt: float, solver: str, steps: int, warmup: int = 3) 
         methods.add(diag.linear_method)
     wall = time.perf_counter() - t0
     n = sim.model.n_points
-    return {"D/h": d_over_h, "dt": dt, "solver": solver, "used": ",".join(sorted(methods)),
+    return {"D/h": d_over_h, "dt": dt, "solver": solver, "mass": mass,
+            "used": ",".join(sorted(methods)),
             "points": n, "ms/step": 1e3 * wall / steps, "newton/step": iters / steps,
             "Mpts/s": n * steps / wall / 1e6}
 
@@ -60,25 +63,25 @@ def main() -> None:
     ap.add_argument("--sizes", type=int, nargs="+", default=[20, 40, 80])
     ap.add_argument("--dts", type=float, nargs="+", default=[1e-7, 1e-5])
     ap.add_argument("--solvers", nargs="+", default=["auto", "cg", "direct"])
+    ap.add_argument("--masses", nargs="+", default=["consistent", "lumped"])
     ap.add_argument("--steps", type=int, default=20)
     args = ap.parse_args()
     print(f"# {platform.processor() or platform.machine()}, {numba.get_num_threads()} threads, "
           f"numba {numba.__version__}, {time.strftime('%Y-%m-%d')}")
-    head = f"{'D/h':>4} {'dt [s]':>8} {'solver':>7} {'used':>10} {'points':>7} " \
-           f"{'ms/step':>9} {'newton':>7} {'Mpts/s':>7}"
+    head = (f"{'D/h':>4} {'dt [s]':>8} {'mass':>10} {'solver':>7} {'used':>10} {'points':>7} "
+            f"{'ms/step':>9} {'newton':>7} {'Mpts/s':>7}")
     print(head)
     print("-" * len(head))
-    for n in args.sizes:
-        for dt in args.dts:
-            for solver in args.solvers:
-                try:
-                    r = measure(n, dt, solver, args.steps)
-                except SimulationError as err:
-                    print(f"{n:>4} {dt:>8.1e} {solver:>7}  failed: {err}", flush=True)
-                    continue
-                print(f"{r['D/h']:>4} {r['dt']:>8.1e} {r['solver']:>7} {r['used']:>10} "
-                      f"{r['points']:>7} {r['ms/step']:>9.2f} {r['newton/step']:>7.2f} "
-                      f"{r['Mpts/s']:>7.3f}", flush=True)
+    for n, dt, mass, solver in itertools.product(args.sizes, args.dts, args.masses,
+                                                 args.solvers):
+        try:
+            r = measure(n, dt, solver, mass, args.steps)
+        except SimulationError as err:
+            print(f"{n:>4} {dt:>8.1e} {mass:>10} {solver:>7}  failed: {err}", flush=True)
+            continue
+        print(f"{r['D/h']:>4} {r['dt']:>8.1e} {mass:>10} {r['solver']:>7} {r['used']:>10} "
+              f"{r['points']:>7} {r['ms/step']:>9.2f} {r['newton/step']:>7.2f} "
+              f"{r['Mpts/s']:>7.3f}", flush=True)
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"peak memory (max RSS): {rss:.0f} MiB")
 

@@ -1,4 +1,5 @@
-"""Internal force and consistent tangent (ALGORITHM.md §3): K = −∂f_int/∂u by finite differences."""
+"""Internal force and consistent tangent (ALGORITHM.md §3): f = −∂W/∂u, K = −∂f/∂u by finite
+differences."""
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ from softgrains.materials import lame_parameters
 
 @pytest.mark.parametrize("kind", [0, 1], ids=["linear", "bspline2"])
 @pytest.mark.parametrize("law", [0, 1], ids=["neo-hookean", "linear-elastic"])
-def test_tangent_is_derivative_of_internal_force(small_body, kind, law):
+def test_tangent_and_force_are_derivatives_of_energy(small_body, kind, law):
     rng = np.random.default_rng(3)
     lat, x, v0, box, nodes, N, dN, s = small_body(kind)
     n = len(x)
@@ -41,6 +42,9 @@ def test_tangent_is_derivative_of_internal_force(small_body, kind, law):
         gather_forces(ptr, entries, dN, Pv, f)
         return f.ravel()
 
+    def energy(u):
+        return point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, False, 4)[1]
+
     point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, True, 4)
     indptr, indices, slot, _ = block_pattern(active_row, box.shape, s)
     data = np.empty((indices.size, 2, 2))
@@ -56,6 +60,10 @@ def test_tangent_is_derivative_of_internal_force(small_body, kind, law):
         um[touched] -= du.reshape(-1, 2)
         fd = -(force(up) - force(um)) / (2 * eps)
         assert np.allclose(fd, K[:, c], rtol=1e-5, atol=1e-6 * np.abs(K).max())
+        # f^int = −∂W/∂u: the line search's potential is consistent with the residual
+        f0 = force(u)
+        dW = (energy(up) - energy(um)) / (2 * eps)
+        assert dW == pytest.approx(-f0[c], rel=1e-5, abs=1e-7 * np.abs(f0).max())
     if law == 0:
         assert np.allclose(K, K.T, atol=1e-9 * np.abs(K).max())
 

@@ -20,7 +20,7 @@ def _update(small_body, kind, nodal_map):
     v = np.zeros((n, 2))
     zeros = np.zeros((box.size, 2))
     xp = x.copy()
-    grid_to_particles(nodes, N, dN, u, zeros, zeros, zeros, 1.0, False,
+    grid_to_particles(nodes, N, dN, u, zeros, zeros, zeros, 0, np.array([1.0, 1.0, 0.5, 0.25, 0.5]),
                       np.zeros(n, dtype=np.int64), np.full(n, lam), np.full(n, mu),
                       np.full(n, v0), xp, v, np.zeros((n, 2)), F, sigma, vol, 4)
     return x, xp, F, sigma, vol, v0, mu

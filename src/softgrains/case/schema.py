@@ -74,7 +74,10 @@ class SimulationSettings(_Section):
     theta: float = Field(0.5, ge=0.5, le=1.0, description="theta of the Moreau-Jean scheme")
     newmark_beta: float = Field(0.25, gt=0.0, le=0.5, description="Newmark beta")
     newmark_gamma: float = Field(0.5, ge=0.5, le=1.0, description="Newmark gamma")
-    flip: float = Field(1.0, ge=0.0, le=1.0, description="FLIP fraction of the FLIP/PIC blend")
+    mass_matrix: Literal["lumped", "consistent"] = Field(
+        "lumped", description="nodal mass matrix: lumped (FLIP/PIC) or consistent (theta only)")
+    flip: float = Field(
+        1.0, ge=0.0, le=1.0, description="FLIP fraction of the FLIP/PIC blend (lumped mass only)")
     seed: int = Field(0, ge=0, description="random seed")
     threads: int = Field(0, ge=0, description="worker threads (0 = all cores)")
     newton_tolerance: float = Field(1e-8, gt=0.0, lt=1.0, description="relative residual")
@@ -88,6 +91,15 @@ class SimulationSettings(_Section):
             return self.steps
         assert self.end_time is not None  # guaranteed by validation
         return max(1, math.ceil(self.end_time / self.dt * (1 - 1e-12)))
+
+    @model_validator(mode="after")
+    def _check_mass_matrix(self) -> SimulationSettings:
+        if self.integrator == "newmark" and self.mass_matrix == "consistent":
+            message = ('not available with integrator = "newmark": its point-level '
+                       'acceleration history grows in modes the grid cannot see; use "lumped", '
+                       'or integrator = "theta"')
+            raise Problems([Problem(("mass_matrix",), self.mass_matrix, message)])
+        return self
 
     @model_validator(mode="after")
     def _check_duration(self) -> SimulationSettings:

@@ -72,24 +72,38 @@ def matmul(A, B, out):
             out[i, j] = acc
 
 
+UPDATE_FLIP_THETA = 0  # v: FLIP/PIC blend of nodal v^{n+1}
+UPDATE_FLIP_NEWMARK = 1  # v: FLIP/PIC blend; a: interpolated nodal a^{n+1}
+UPDATE_PARTICLE_THETA = 2  # v from the point's own displacement, θ-scheme
+UPDATE_PARTICLE_NEWMARK = 3  # v, a from the point's own displacement, Newmark
+
+
 @njit(cache=True, parallel=True)
-def grid_to_particles(nodes, N, dN, u_I, v_old_I, v_new_I, a_new_I, flip, update_a,
+def grid_to_particles(nodes, N, dN, u_I, v_old_I, v_new_I, a_new_I, update, params,
                       law, lam, mu, vol0, x, v, a, F, sigma, vol, n_chunks):
     """Move points with the converged nodal solution and update v, a, F, σ, V (in place).
 
+    ``params`` = (Δt, FLIP fraction α, θ, β, γ). With the consistent mass matrix the points
+    are integrated on their own displacement δx_p = Σ N_I u_I (``UPDATE_PARTICLE_*``):
+        θ-scheme: v_p ← (δx_p/Δt − (1−θ) v_p)/θ
+        Newmark:  a_p ← (δx_p − Δt v_p − (½−β)Δt² a_p)/(βΔt²),  v_p ← v_p + Δt[(1−γ)a_p + γ a_p⁺]
+    which conserves the energy exactly for θ = 1/2 and a linear law, since the grid equations
+    with the consistent mass are the same rule projected (docs/theory.md).
     Points are processed in ``n_chunks`` chunks, each with its own scratch arrays.
     Returns the smallest J found (≤ 0 means an inverted point).
     """
     n, ns = nodes.shape
     d = x.shape[1]
+    dt, flip, theta, beta, gamma = params[0], params[1], params[2], params[3], params[4]
     n_chunks = max(1, min(n, n_chunks))
-    Jmin_chunk = np.full(n_chunks, np.inf)
+    Jmin_chunk = np.empty(n_chunks)
     for c in prange(n_chunks):
         dF = np.empty((d, d))
         Fnew = np.empty((d, d))
         P = np.empty((d, d))
         A = np.empty((d, d, d, d))
         Finv = np.empty((d, d))
+        jmin = np.inf
         for p in range(c * n // n_chunks, (c + 1) * n // n_chunks):
             deformation_increment(nodes, dN, p, u_I, dF)
             for i in range(d):
@@ -105,15 +119,22 @@ def grid_to_particles(nodes, N, dN, u_I, v_old_I, v_new_I, a_new_I, flip, update
                     vpic += w * v_new_I[I, i]
                     apic += w * a_new_I[I, i]
                 x[p, i] += du
-                v[p, i] = flip * (v[p, i] + dv) + (1.0 - flip) * vpic
-                if update_a:
-                    a[p, i] = apic
+                if update == UPDATE_PARTICLE_THETA:
+                    v[p, i] = (du / dt - (1.0 - theta) * v[p, i]) / theta
+                elif update == UPDATE_PARTICLE_NEWMARK:
+                    a_new = (du - dt * v[p, i] - (0.5 - beta) * dt * dt * a[p, i]) / (beta * dt * dt)
+                    v[p, i] += dt * ((1.0 - gamma) * a[p, i] + gamma * a_new)
+                    a[p, i] = a_new
+                else:
+                    v[p, i] = flip * (v[p, i] + dv) + (1.0 - flip) * vpic
+                    if update == UPDATE_FLIP_NEWMARK:
+                        a[p, i] = apic
             matmul(dF, F[p], Fnew)
             F[p] = Fnew
             J = determinant(Fnew)
-            if J < Jmin_chunk[c]:
-                Jmin_chunk[c] = J
+            jmin = min(jmin, J)
             if J > 0.0:
                 cauchy_stress(law[p], Fnew, lam[p], mu[p], sigma[p], P, A, Finv)
                 vol[p] = J * vol0[p]
+        Jmin_chunk[c] = jmin
     return Jmin_chunk.min()

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from softgrains.grid.transfers import deformation_increment, matmul
-from softgrains.materials.dispatch import pk1_and_tangent
+from softgrains.materials.dispatch import pk1_and_tangent, strain_energy
 from softgrains.materials.tensor import determinant
 
 
@@ -108,13 +108,15 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
     """Per point: Pv = V^n P̃ (d×d) and, if ``want_tangent``, Av = V^n Ã (d×d×d×d).
 
     Points are processed in ``n_chunks`` chunks (a few per thread), each with its own
-    scratch arrays (no allocation per point). Returns the smallest J of the trial state
-    (≤ 0: the trial state inverts a point; that point's Pv and Av are then left unset).
+    scratch arrays (no allocation per point). Returns (smallest J of the trial state, strain
+    energy Σ V⁰ W(F) of the trial state); J ≤ 0 means the trial state inverts a point (that
+    point's Pv and Av are then left unset and the energy is meaningless).
     """
     n = nodes.shape[0]
     d = u_I.shape[1]
     n_chunks = max(1, min(n, n_chunks))
     Jmin_chunk = np.empty(n_chunks)
+    W_chunk = np.empty(n_chunks)
     for c in prange(n_chunks):
         dF = np.empty((d, d))
         F = np.empty((d, d))
@@ -123,6 +125,7 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
         Fn = np.empty((d, d))
         A = np.empty((d, d, d, d))
         jmin = np.inf
+        energy = 0.0
         for p in range(c * n // n_chunks, (c + 1) * n // n_chunks):
             deformation_increment(nodes, dN, p, u_I, dF)
             for i in range(d):
@@ -133,7 +136,8 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
             jmin = min(jmin, J)
             if J <= 0.0:
                 continue
-            scale = vol_n[p] / determinant(Fn)
+            scale = vol_n[p] / determinant(Fn)  # = V⁰
+            energy += scale * strain_energy(law[p], F, lam[p], mu[p])
             # V^n P̃ = (V^n/J^n) P Fnᵀ
             for i in range(d):
                 for a in range(d):
@@ -154,7 +158,8 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
                                     acc += A[i, M, k, N_] * Fn[a, M] * Fn[b, N_]
                             Av[p, i, a, k, b] = scale * acc
         Jmin_chunk[c] = jmin
-    return Jmin_chunk.min()
+        W_chunk[c] = energy
+    return Jmin_chunk.min(), W_chunk.sum()
 
 
 @njit(cache=True)
@@ -233,18 +238,62 @@ def gather_tangent(ptr, entries, dN, Av, slot, codes, data):
                         data[q, i, k] += acc
 
 
-@njit(cache=True)
-def add_diagonal_and_constrain(data, indptr, indices, diag_slot, diag, fixed):
-    """data += diag on the block diagonals; then rows/columns of fixed dofs become identity.
+@njit(cache=True, parallel=True)
+def gather_consistent_mass(ptr, entries, N, mass, slot, codes, m_blocks):
+    """Consistent mass M_IJ = Σ_p m_p N_I(X_p) N_J(X_p) (a scalar per block), row-parallel."""
+    n_rows = ptr.shape[0] - 1
+    ns = N.shape[1]
+    for r in prange(n_rows):
+        for c in range(slot.shape[1]):
+            q = slot[r, c]
+            if q >= 0:
+                m_blocks[q] = 0.0
+        for e in range(ptr[r], ptr[r + 1]):
+            p = entries[e] // ns
+            ka = entries[e] % ns
+            w = mass[p] * N[p, ka]
+            for kb in range(ns):
+                q = slot[r, codes[ka, kb]]
+                if q >= 0:
+                    m_blocks[q] += w * N[p, kb]
 
-    ``diag`` and ``fixed`` are per dof (row-major: dof = row*d + i).
-    """
-    n_rows = indptr.shape[0] - 1
+
+@njit(cache=True, parallel=True)
+def block_scalar_matvec(indptr, indices, m_blocks, u, out):
+    """out = (M ⊗ I_d) u for a matrix M with one scalar per block of the BSR pattern."""
+    n_rows, d = out.shape
+    for r in prange(n_rows):
+        for i in range(d):
+            acc = 0.0
+            for q in range(indptr[r], indptr[r + 1]):
+                acc += m_blocks[q] * u[indices[q], i]
+            out[r, i] = acc
+
+
+@njit(cache=True)
+def add_block_mass(data, m_blocks, c):
+    """data[q] += c m_q I_d for every block q (the consistent mass term of the Newton matrix)."""
     d = data.shape[1]
-    for r in range(n_rows):
+    for q in range(data.shape[0]):
+        for i in range(d):
+            data[q, i, i] += c * m_blocks[q]
+
+
+@njit(cache=True)
+def add_diagonal(data, diag_slot, diag):
+    """data += diag on the block diagonals (the lumped mass term; diag per dof = row*d + i)."""
+    d = data.shape[1]
+    for r in range(diag_slot.shape[0]):
         q = diag_slot[r]
         for i in range(d):
             data[q, i, i] += diag[r * d + i]
+
+
+@njit(cache=True)
+def constrain(data, indptr, indices, fixed):
+    """Rows and columns of fixed dofs (per dof, row*d + i) become those of the identity."""
+    n_rows = indptr.shape[0] - 1
+    d = data.shape[1]
     for r in range(n_rows):
         for q in range(indptr[r], indptr[r + 1]):
             c = indices[q]

@@ -8,8 +8,10 @@ Newmark (β, γ; trapezoidal rule for β = 1/4, γ = 1/2), force units:
     R(u) = M a^{n+1} − F^{n+1}(u) − P/(γΔt),              dR/du = M/(βΔt²) + K_T
 F = f^int + f^ext (f^ext = M g). Newton stops when ‖R‖ ≤ max(tol ‖R_0‖, floor), with the floor
 the residual of a displacement error of 1e-10 h at every node: floor = 1e-10 h c_m ‖M‖
-(c_m = 1/(θΔt) or 1/(βΔt²)). Dirichlet dofs carry their prescribed velocity (u = Δt v̄). A Newton update that would invert
-a point (J ≤ 0) is halved, up to MAX_STEP_HALVINGS times.
+(c_m = 1/(θΔt) or 1/(βΔt²)). Dirichlet dofs carry their prescribed velocity (u = Δt v̄). Both residuals are gradients of an
+incremental potential, R = ∇Π with Π(u) = ½ c_m uᵀMu − b·u + s W(u) (s = θΔt or 1,
+W = Σ V⁰ W(F(u))), so Newton updates go through a backtracking (Armijo) line search on Π that
+also rejects updates inverting a point (J ≤ 0).
 Contact impulses P are zero until the contact issue adds them.
 """
 
@@ -24,10 +26,22 @@ import scipy.sparse as sp
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice, NodeBox
 from softgrains.grid.shape_functions import compute_stencils, stencil_width
-from softgrains.grid.transfers import grid_to_particles, local_node_indices, particles_to_grid
+from softgrains.grid.transfers import (
+    UPDATE_FLIP_NEWMARK,
+    UPDATE_FLIP_THETA,
+    UPDATE_PARTICLE_NEWMARK,
+    UPDATE_PARTICLE_THETA,
+    grid_to_particles,
+    local_node_indices,
+    particles_to_grid,
+)
 from softgrains.integrator.assembly import (
-    add_diagonal_and_constrain,
+    add_block_mass,
+    add_diagonal,
     block_pattern,
+    block_scalar_matvec,
+    constrain,
+    gather_consistent_mass,
     gather_forces,
     gather_tangent,
     node_point_map,
@@ -36,10 +50,10 @@ from softgrains.integrator.assembly import (
 )
 from softgrains.integrator.linear_solvers import LinearSolver
 
-ACTIVE_MASS_FRACTION = 1e-12
+ACTIVE_MASS_FRACTION = 1e-4  # nodes lighter than this fraction of the heaviest point are inactive
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
 CHUNKS_PER_THREAD = 8  # point chunks per thread in the parallel kernels
-MAX_STEP_HALVINGS = 8  # backtracking of a Newton update that inverts a point
+MAX_LINE_SEARCH = 8  # halvings of a Newton update in the backtracking line search
 
 
 @dataclass(frozen=True)
@@ -51,6 +65,7 @@ class IntegratorSettings:
     beta: float = 0.25
     gamma: float = 0.5
     flip: float = 1.0
+    mass_matrix: str = "lumped"  # "lumped" | "consistent"
     tolerance: float = 1e-8
     max_iterations: int = 25
     linear_solver: str = "auto"
@@ -145,10 +160,46 @@ class BodyStepper:
                     vbar[inside, j] = c.velocity[j]
         return fixed, vbar
 
+    @staticmethod
+    def _line_search(u, du, r, pi, internal_force, residual, potential):
+        """Backtracking along the Newton direction: u + α du, α = 1, ½, ¼, ...
+
+        The step equations are the stationarity of the incremental potential Π (R = ∇Π), so
+        the first α with no inverted point and either the Armijo decrease
+        Π(u + α du) ≤ Π(u) + 10⁻⁴ α R·du or a residual decrease ‖R‖ ≤ (1 − 10⁻⁴ α)‖R(u)‖ is
+        taken (the second test decides near convergence, where differences of Π drown in
+        round-off). If du is no descent direction (R·du ≥ 0) or no α within
+        MAX_LINE_SEARCH halvings qualifies, the admissible trial of lowest Π is taken (if every
+        trial inverts a point, the last one, which the caller reports).
+        """
+        slope = float(np.sum(r * du))
+        rnorm = float(np.linalg.norm(r))
+        alpha = 1.0
+        best = None
+        for _ in range(MAX_LINE_SEARCH + 1):
+            u_try = u + alpha * du
+            f_try, j_try, w_try = internal_force(u_try, False)
+            if j_try > 0.0:
+                pi_try = potential(u_try, w_try)
+                r_try = residual(u_try, f_try)
+                n_try = float(np.linalg.norm(r_try))
+                trial = (u_try, f_try, r_try, n_try, j_try, pi_try)
+                armijo = slope < 0.0 and pi_try <= pi + 1e-4 * alpha * slope
+                if np.isfinite(n_try) and (armijo or n_try <= (1.0 - 1e-4 * alpha) * rnorm):
+                    return trial
+                if np.isfinite(n_try) and (best is None or pi_try < best[5]):
+                    best = trial
+            alpha *= 0.5
+        if best is not None:
+            return best
+        return u_try, f_try, residual(u_try, f_try), float("nan"), j_try, float("nan")
+
     # -- the step ----------------------------------------------------------------------
     def step(self, pts: BodyPoints, gravity: np.ndarray, dt: float, step: int) -> BodyStepResult:
         st = self.settings
         d = self.lattice.dim
+        newmark = st.kind == "newmark"
+        consistent = st.mass_matrix == "consistent"
         box, nodes, N, dN = self._stencils(pts, step)
         n_box = box.size
         m_I = np.empty(n_box)
@@ -156,79 +207,87 @@ class BodyStepper:
         ma_I = np.empty((n_box, d))
         particles_to_grid(nodes, N, pts.mass, pts.v, pts.a, n_box, m_I, mv_I, ma_I)
         active = np.flatnonzero(m_I > ACTIVE_MASS_FRACTION * pts.mass.max())
+        n_act = active.size
         active_row = -np.ones(n_box, dtype=np.int64)
-        active_row[active] = np.arange(active.size)
-        m = m_I[active][:, None] * np.ones(d)
-        v_n = mv_I[active] / m
-        newmark = st.kind == "newmark"
-        a_n = ma_I[active] / m if newmark else np.zeros_like(v_n)
+        active_row[active] = np.arange(n_act)
+        m = m_I[active][:, None] * np.ones(d)  # lumped mass per dof
+        p_n = mv_I[active]  # nodal momentum Σ N m v (= M v^n for either mass matrix)
+        q_n = ma_I[active]  # Σ N m a (Newmark)
+        v_n = p_n / m  # lumped estimates (predictor; FLIP increments)
+        a_n = q_n / m if newmark else np.zeros_like(v_n)
         fixed, vbar = self._dirichlet(box, active)
         v_n[fixed] = vbar[fixed]
         a_n[fixed] = 0.0
+        if not consistent:
+            p_n = m * v_n
+            q_n = m * a_n
         f_ext = m * gravity
 
         indptr, indices, slot, diag_slot = block_pattern(active_row, box.shape, self.s)
-        ptr, entries = node_point_map(nodes, active_row, active.size)
-        n_pts = nodes.shape[0]
+        ptr, entries = node_point_map(nodes, active_row, n_act)
         n_chunks = CHUNKS_PER_THREAD * numba.get_num_threads()
-        Pv = np.empty((n_pts, d, d))
-        Av = np.empty((n_pts, d, d, d, d))
+        Pv = np.empty((nodes.shape[0], d, d))
+        Av = np.empty((nodes.shape[0], d, d, d, d))
         data = np.empty((indices.size, d, d))
-        f_int = np.empty((active.size, d))
+        f_int = np.empty((n_act, d))
         u_box = np.zeros((n_box, d))
         F_n = pts.F.copy()
         vol_n = pts.vol.copy()
+        if consistent:
+            m_blocks = np.empty(indices.size)
+            gather_consistent_mass(ptr, entries, N, pts.mass, slot, self.codes, m_blocks)
+            Mu = np.empty((n_act, d))
+
+        def mass_times(u):
+            if not consistent:
+                return m * u
+            block_scalar_matvec(indptr, indices, m_blocks, u, Mu)
+            return Mu
 
         def internal_force(u, want_tangent):
-            """f^int(u) on the active nodes (and K in `data` if want_tangent); min J."""
+            """f^int(u) on the active nodes (and K in `data` if want_tangent); min J, W(u)."""
             u_box[active] = u
-            jmin = point_stresses(nodes, dN, u_box, F_n, vol_n, pts.law, pts.lam, pts.mu,
+            jmin, w_int = point_stresses(nodes, dN, u_box, F_n, vol_n, pts.law, pts.lam, pts.mu,
                                   Pv, Av, want_tangent, n_chunks)
             if jmin > 0.0:
                 gather_forces(ptr, entries, dN, Pv, f_int)
                 if want_tangent:
                     gather_tangent(ptr, entries, dN, Av, slot, self.codes, data)
-            return f_int.copy(), jmin
+            return f_int.copy(), jmin, w_int
 
-        f_int_n, _ = internal_force(np.zeros_like(v_n), False)
-        if newmark:
+        # R(u) = c_m M u − b − s f^int(u) = ∇Π(u),  Π(u) = ½ c_m uᵀMu − b·u + s W(u)
+        f_int_n, _, _ = internal_force(np.zeros_like(v_n), False)
+        if newmark:  # M a^{n+1} − F^{n+1}
             c_m = 1.0 / (st.beta * dt * dt)
+            s_f = 1.0
+            b = c_m * (dt * p_n + (0.5 - st.beta) * dt * dt * q_n) + f_ext
             u = dt * v_n + 0.5 * dt * dt * a_n
-        else:
+        else:  # M (v^{n+1} − v^n) − Δt[(1−θ)F^n + θF^{n+1}]
             c_m = 1.0 / (st.theta * dt)
+            s_f = st.theta * dt
+            b = (c_m * (1.0 - st.theta) * dt + 1.0) * p_n + dt * (
+                (1.0 - st.theta) * (f_int_n + f_ext) + st.theta * f_ext)
             u = dt * v_n
-            force_n = f_int_n + f_ext
         u[fixed] = dt * vbar[fixed]
 
         def residual(u, f_int):
-            if newmark:
-                a1 = c_m * (u - dt * v_n) - (0.5 / st.beta - 1.0) * a_n
-                r = m * a1 - f_int - f_ext
-            else:
-                v1 = (u / dt - (1.0 - st.theta) * v_n) / st.theta
-                r = m * (v1 - v_n) - dt * ((1.0 - st.theta) * force_n + st.theta * (f_int + f_ext))
+            r = c_m * mass_times(u) - b - s_f * f_int
             r[fixed] = 0.0
             return r
 
+        def potential(u, w_int):
+            return float(0.5 * c_m * np.sum(u * mass_times(u)) - np.sum(b * u) + s_f * w_int)
+
         floor = RESIDUAL_FLOOR_DISPLACEMENT * self.lattice.h * c_m * np.linalg.norm(m)
         fixed_flat = fixed.ravel()
-        diag = (m * c_m).ravel()
-        k_scale = 1.0 if newmark else st.theta * dt
+        lumped_diag = (m * c_m).ravel()
         result = BodyStepResult(iterations=0)
-        r0 = None
-        du = None
-        halvings = 0
+        f_int, jmin, w_int = internal_force(u, False)
+        r = residual(u, f_int)
+        rnorm = float(np.linalg.norm(r))
+        pi = potential(u, w_int)
+        r0 = rnorm
         while True:
-            f_int, jmin = internal_force(u, False)
-            if jmin <= 0.0 and du is not None and halvings < MAX_STEP_HALVINGS:
-                # the Newton update inverts a point: backtrack along it
-                du *= 0.5
-                u = u - du
-                halvings += 1
-                continue
-            halvings = 0
-            r = residual(u, f_int)
-            rnorm = float(np.linalg.norm(r))
             if not np.isfinite(rnorm) or jmin <= 0.0:
                 raise SimulationError(
                     f"step {step}: Newton of body '{self.name}' produced "
@@ -236,8 +295,6 @@ class BodyStepper:
                     f"at iteration {result.iterations}; try a smaller dt or a finer grid.",
                     step=step, body=self.name, residuals=result.residuals + [rnorm])
             result.residuals.append(rnorm)
-            if r0 is None:
-                r0 = rnorm
             if rnorm <= max(st.tolerance * r0, floor):
                 break
             if result.iterations >= st.max_iterations:
@@ -248,10 +305,14 @@ class BodyStepper:
                     "newton_tolerance.",
                     step=step, body=self.name, residuals=result.residuals)
             internal_force(u, True)
-            if k_scale != 1.0:
-                data *= k_scale
-            add_diagonal_and_constrain(data, indptr, indices, diag_slot, diag, fixed_flat)
-            A = sp.bsr_matrix((data, indices, indptr), shape=(diag.size, diag.size))
+            if s_f != 1.0:
+                data *= s_f
+            if consistent:
+                add_block_mass(data, m_blocks, c_m)
+            else:
+                add_diagonal(data, diag_slot, lumped_diag)
+            constrain(data, indptr, indices, fixed_flat)
+            A = sp.bsr_matrix((data, indices, indptr), shape=(lumped_diag.size,) * 2)
             try:
                 du = self.solver.solve(A, -r.ravel(), diag_slot).reshape(u.shape)
             except (np.linalg.LinAlgError, RuntimeError) as err:
@@ -259,26 +320,31 @@ class BodyStepper:
                     f"step {step}: linear solve of body '{self.name}' failed at Newton "
                     f"iteration {result.iterations}: {err}", step=step, body=self.name,
                     residuals=result.residuals) from err
-            u = u + du
             result.iterations += 1
             result.linear_method = self.solver.last_method
             result.linear_iterations += self.solver.last_iterations
+            u, f_int, r, rnorm, jmin, pi = self._line_search(
+                u, du, r, pi, internal_force, residual, potential)
 
-        if newmark:
-            a1 = c_m * (u - dt * v_n) - (0.5 / st.beta - 1.0) * a_n
-            v1 = v_n + dt * ((1.0 - st.gamma) * a_n + st.gamma * a1)
-        else:
-            a1 = np.zeros_like(u)
-            v1 = (u / dt - (1.0 - st.theta) * v_n) / st.theta
+        u_box[:] = 0.0
+        u_box[active] = u
         v_old = np.zeros((n_box, d))
         v_new = np.zeros((n_box, d))
         a_new = np.zeros((n_box, d))
-        u_box[:] = 0.0
-        u_box[active] = u
-        v_old[active] = v_n
-        v_new[active] = v1
-        a_new[active] = a1
-        jmin = grid_to_particles(nodes, N, dN, u_box, v_old, v_new, a_new, st.flip, newmark,
+        if consistent:
+            update = UPDATE_PARTICLE_NEWMARK if newmark else UPDATE_PARTICLE_THETA
+        else:
+            update = UPDATE_FLIP_NEWMARK if newmark else UPDATE_FLIP_THETA
+            if newmark:
+                a1 = c_m * (u - dt * v_n) - (0.5 / st.beta - 1.0) * a_n
+                v1 = v_n + dt * ((1.0 - st.gamma) * a_n + st.gamma * a1)
+                a_new[active] = a1
+            else:
+                v1 = (u / dt - (1.0 - st.theta) * v_n) / st.theta
+            v_old[active] = v_n
+            v_new[active] = v1
+        params = np.array([dt, st.flip, st.theta, st.beta, st.gamma])
+        jmin = grid_to_particles(nodes, N, dN, u_box, v_old, v_new, a_new, update, params,
                                  pts.law, pts.lam, pts.mu, pts.vol0, pts.x, pts.v, pts.a,
                                  pts.F, pts.sigma, pts.vol, n_chunks)
         if jmin <= 0.0:
