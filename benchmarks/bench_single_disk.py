@@ -16,7 +16,6 @@ import resource
 import time
 
 import numba
-import numpy as np
 
 from softgrains.case import load_case
 from softgrains.errors import SimulationError

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from softgrains.io import read_pvd, read_points_vtu, read_table
+from softgrains.io import read_points_vtu, read_pvd, read_table
 
 EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.toml"))
 

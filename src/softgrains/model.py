@@ -131,7 +131,8 @@ def build(case) -> tuple[Model, State]:
         gravity = np.asarray(case.gravity.acceleration, dtype=float)
     settings = IntegratorSettings(
         kind=sim.integrator, theta=sim.theta, beta=sim.newmark_beta, gamma=sim.newmark_gamma,
-        flip=sim.flip, mass_matrix=sim.mass_matrix, tolerance=sim.newton_tolerance, max_iterations=sim.newton_max_iterations,
+        flip=sim.flip, mass_matrix=sim.mass_matrix, tolerance=sim.newton_tolerance,
+        max_iterations=sim.newton_max_iterations,
         linear_solver=sim.linear_solver)
     model = Model(
         dim=dim, lattice=lattice, shape_kind=SHAPE_FUNCTIONS[grid.shape_function],

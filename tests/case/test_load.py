@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from case_dicts import minimal_case
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -16,16 +17,6 @@ from softgrains.case.schema import SHAPE_KEYS, Body, Boundary, GridSettings, Sim
 from softgrains.errors import CaseError
 
 EXAMPLE = Path(__file__).parents[2] / "examples" / "free_disk.toml"
-
-
-def minimal_case() -> dict:
-    """The smallest valid case: one disk in a 1 m square."""
-    return {
-        "simulation": {"dt": 1e-3, "end_time": 0.1},
-        "grid": {"cell_size": 0.05, "size": [1.0, 1.0]},
-        "materials": {"rubber": {"young": 1e6, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [{"shape": "disk", "center": [0.5, 0.5], "radius": 0.2, "material": "rubber"}],
-    }
 
 
 def rich_case() -> dict:

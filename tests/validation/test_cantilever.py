@@ -10,7 +10,6 @@ h = 0.25 and 0.125 with Δt = 0.5 s.
 """
 
 import numpy as np
-import pytest
 
 CORNER = np.array([4.0, 0.0])
 REFERENCE = np.array([-1.47, -2.51])
@@ -51,5 +50,6 @@ def test_newton_converges_quadratically(run_example):
     assert len(r) >= 4
     orders = np.log(r[2:] / r[1:-1]) / np.log(r[1:-1] / r[:-2])
     # the asymptotic iterations (residual well below its start, above round-off)
-    asymptotic = [o for o, rk in zip(orders, r[1:-1]) if 1e-9 * r[0] < rk < 1e-2 * r[0]]
+    asymptotic = [o for o, rk in zip(orders, r[1:-1], strict=True)
+                  if 1e-9 * r[0] < rk < 1e-2 * r[0]]
     assert asymptotic and max(asymptotic) > 1.8, (r, orders)

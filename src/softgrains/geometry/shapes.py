@@ -80,7 +80,7 @@ class Polygon(Shape):
         v = np.asarray(self.vertices, dtype=float)
         inside = np.zeros(len(x), dtype=bool)
         px, py = x[:, 0], x[:, 1]
-        for a, b in zip(v, np.roll(v, -1, axis=0)):
+        for a, b in zip(v, np.roll(v, -1, axis=0), strict=True):
             crosses = (a[1] > py) != (b[1] > py)
             with np.errstate(divide="ignore", invalid="ignore"):
                 xc = a[0] + (py - a[1]) * (b[0] - a[0]) / (b[1] - a[1])

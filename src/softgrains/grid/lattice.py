@@ -27,7 +27,7 @@ class Lattice:
     domain_upper: np.ndarray
 
     @classmethod
-    def covering(cls, origin, size, h: float, pad: int = PAD_NODES) -> "Lattice":
+    def covering(cls, origin, size, h: float, pad: int = PAD_NODES) -> Lattice:
         origin = np.asarray(origin, dtype=float)
         size = np.asarray(size, dtype=float)
         cells = np.ceil(size / h - 1e-9).astype(np.int64)
@@ -43,7 +43,7 @@ class Lattice:
     def dim(self) -> int:
         return len(self.n_nodes)
 
-    def node_positions(self, box: "NodeBox") -> np.ndarray:
+    def node_positions(self, box: NodeBox) -> np.ndarray:
         """Positions (n_box_nodes, d) of a box's nodes in local order (axis 0 fastest)."""
         axes = [self.node_origin[j] + self.h * (box.lower[j] + np.arange(box.shape[j]))
                 for j in range(self.dim)]
@@ -63,7 +63,7 @@ class NodeBox:
         return int(np.prod(self.shape))
 
     @classmethod
-    def of_stencils(cls, base: np.ndarray, width: int) -> "NodeBox":
+    def of_stencils(cls, base: np.ndarray, width: int) -> NodeBox:
         lower = base.min(axis=0)
         upper = base.max(axis=0) + width
         return cls(lower=lower.astype(np.int64), shape=(upper - lower).astype(np.int64))

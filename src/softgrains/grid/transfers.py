@@ -122,7 +122,8 @@ def grid_to_particles(nodes, N, dN, u_I, v_old_I, v_new_I, a_new_I, update, para
                 if update == UPDATE_PARTICLE_THETA:
                     v[p, i] = (du / dt - (1.0 - theta) * v[p, i]) / theta
                 elif update == UPDATE_PARTICLE_NEWMARK:
-                    a_new = (du - dt * v[p, i] - (0.5 - beta) * dt * dt * a[p, i]) / (beta * dt * dt)
+                    a_new = ((du - dt * v[p, i] - (0.5 - beta) * dt * dt * a[p, i])
+                             / (beta * dt * dt))
                     v[p, i] += dt * ((1.0 - gamma) * a[p, i] + gamma * a_new)
                     a[p, i] = a_new
                 else:

@@ -8,10 +8,11 @@ Newmark (β, γ; trapezoidal rule for β = 1/4, γ = 1/2), force units:
     R(u) = M a^{n+1} − F^{n+1}(u) − P/(γΔt),              dR/du = M/(βΔt²) + K_T
 F = f^int + f^ext (f^ext = M g). Newton stops when ‖R‖ ≤ max(tol ‖R_0‖, floor), with the floor
 the residual of a displacement error of 1e-10 h at every node: floor = 1e-10 h c_m ‖M‖
-(c_m = 1/(θΔt) or 1/(βΔt²)). Dirichlet dofs carry their prescribed velocity (u = Δt v̄). Both residuals are gradients of an
-incremental potential, R = ∇Π with Π(u) = ½ c_m uᵀMu − b·u + s W(u) (s = θΔt or 1,
-W = Σ V⁰ W(F(u))), so Newton updates go through a backtracking (Armijo) line search on Π that
-also rejects updates inverting a point (J ≤ 0).
+(c_m = 1/(θΔt) or 1/(βΔt²)). Dirichlet dofs carry their prescribed velocity (u = Δt v̄).
+Both residuals are gradients of an incremental potential, R = ∇Π with
+Π(u) = ½ c_m uᵀMu − b·u + s W(u) (s = θΔt or 1, W = Σ V⁰ W(F(u))), so Newton updates go
+through a backtracking (Armijo) line search on Π that also rejects updates inverting a point
+(J ≤ 0). M is the lumped or the consistent mass matrix (docs/theory.md).
 Contact impulses P are zero until the contact issue adds them.
 """
 

@@ -108,7 +108,7 @@ def read_table(path: str | Path) -> dict[str, np.ndarray]:
             raise ValueError(
                 f"{path}: data row {number} has {len(row)} cells, expected {len(header)}"
             )
-    columns = list(zip(*body)) if body else [() for _ in header]
+    columns = list(zip(*body, strict=True)) if body else [() for _ in header]
     table: dict[str, np.ndarray] = {}
     for name, cells in zip(header, columns, strict=True):
         try:

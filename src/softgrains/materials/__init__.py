@@ -9,8 +9,8 @@ the kernels dispatch on.
 from softgrains.materials.dispatch import (
     LAW_CODES,
     cauchy_stress,
-    law_code,
     lame_parameters,
+    law_code,
     pk1_and_tangent,
     strain_energy,
 )

@@ -7,8 +7,6 @@ The contact force a body receives is zero until the contact issue adds contacts.
 
 from __future__ import annotations
 
-import numpy as np
-
 from softgrains.observe.energies import kinetic_energy, strain_energy
 
 AXES = "xyz"
