@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
@@ -47,7 +48,11 @@ def plot_run(run_dir: str | Path) -> list[Path]:
     kinetic, strain = series["kinetic_energy"], series["strain_energy"]
     axes.plot(time, kinetic, label="kinetic")
     axes.plot(time, strain, label="strain")
-    axes.plot(time, kinetic + strain, label="total", color="black", linestyle="--")
+    total = kinetic + strain
+    if "gravity_energy" in series and np.any(series["gravity_energy"] != 0.0):
+        axes.plot(time, series["gravity_energy"], label="gravity (potential)")
+        total = total + series["gravity_energy"]
+    axes.plot(time, total, label="total", color="black", linestyle="--")
     axes.legend(frameon=False)
 
     newton, axes = _new_axes("time [s]", "Newton iterations per step")
