@@ -26,14 +26,14 @@ import scipy.sparse as sp
 
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice, NodeBox
-from softgrains.grid.shape_functions import compute_stencils, stencil_width
+from softgrains.grid.shape_functions import stencil_width
+from softgrains.grid.stencils import body_stencils
 from softgrains.grid.transfers import (
     UPDATE_FLIP_NEWMARK,
     UPDATE_FLIP_THETA,
     UPDATE_PARTICLE_NEWMARK,
     UPDATE_PARTICLE_THETA,
     grid_to_particles,
-    local_node_indices,
     particles_to_grid,
 )
 from softgrains.integrator.assembly import (
@@ -124,27 +124,6 @@ class BodyStepper:
         self.codes = pair_codes(self.s, lattice.dim)
 
     # -- step set-up -------------------------------------------------------------------
-    def _stencils(self, pts: BodyPoints, step: int):
-        n, d = pts.x.shape
-        ns = self.s**d
-        base = np.empty((n, d), dtype=np.int64)
-        N = np.empty((n, ns))
-        dN = np.empty((n, ns, d))
-        lat = self.lattice
-        compute_stencils(pts.x, lat.node_origin, lat.h, self.shape_kind, base, N, dN)
-        out = (base < 0) | (base + self.s > lat.n_nodes)
-        if out.any():
-            p = int(np.argwhere(out.any(axis=1))[0, 0])
-            raise SimulationError(
-                f"step {step}: point {p} of body '{self.name}' at {pts.x[p].tolist()} left the "
-                f"grid [{lat.domain_lower.tolist()}, {lat.domain_upper.tolist()}]; enlarge "
-                "[grid] size/origin or check the loading.",
-                step=step, body=self.name, point=p)
-        box = NodeBox.of_stencils(base, self.s)
-        nodes = np.empty((n, ns), dtype=np.int64)
-        local_node_indices(base, box.lower, box.strides(), self.s, nodes)
-        return box, nodes, N, dN
-
     def _dirichlet(self, box: NodeBox, active: np.ndarray):
         d = self.lattice.dim
         fixed = np.zeros((active.size, d), dtype=bool)
@@ -201,7 +180,8 @@ class BodyStepper:
         d = self.lattice.dim
         newmark = st.kind == "newmark"
         consistent = st.mass_matrix == "consistent"
-        box, nodes, N, dN = self._stencils(pts, step)
+        stencils = body_stencils(self.lattice, self.shape_kind, pts.x, self.name, step)
+        box, nodes, N, dN = stencils.box, stencils.nodes, stencils.N, stencils.dN
         n_box = box.size
         m_I = np.empty(n_box)
         mv_I = np.empty((n_box, d))

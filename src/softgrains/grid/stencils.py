@@ -1,0 +1,43 @@
+"""A body's stencils for one step: its node box and, per point, the local node indices,
+N_I(x_p) and ∇N_I(x_p) (ALGORITHM.md §2). Shared by the implicit step and contact detection."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from softgrains.errors import SimulationError
+from softgrains.grid.lattice import Lattice, NodeBox
+from softgrains.grid.shape_functions import compute_stencils, stencil_width
+from softgrains.grid.transfers import local_node_indices
+
+
+@dataclass(frozen=True)
+class BodyStencils:
+    box: NodeBox
+    nodes: np.ndarray  # (n, s^d) local node index in the box
+    N: np.ndarray  # (n, s^d)
+    dN: np.ndarray  # (n, s^d, d)
+
+
+def body_stencils(lattice: Lattice, shape_kind: int, x: np.ndarray, body: str = "",
+                  step: int = 0) -> BodyStencils:
+    """Stencils of points x; a point whose stencil leaves the lattice is a SimulationError."""
+    n, d = x.shape
+    s = stencil_width(shape_kind)
+    base = np.empty((n, d), dtype=np.int64)
+    N = np.empty((n, s**d))
+    dN = np.empty((n, s**d, d))
+    compute_stencils(x, lattice.node_origin, lattice.h, shape_kind, base, N, dN)
+    out = (base < 0) | (base + s > lattice.n_nodes)
+    if out.any():
+        p = int(np.argwhere(out.any(axis=1))[0, 0])
+        raise SimulationError(
+            f"step {step}: point {p} of body '{body}' at {x[p].tolist()} left the grid "
+            f"[{lattice.domain_lower.tolist()}, {lattice.domain_upper.tolist()}]; enlarge "
+            "[grid] size/origin or check the loading.", step=step, body=body, point=p)
+    box = NodeBox.of_stencils(base, s)
+    nodes = np.empty((n, s**d), dtype=np.int64)
+    local_node_indices(base, box.lower, box.strides(), s, nodes)
+    return BodyStencils(box, nodes, N, dN)
