@@ -1,0 +1,119 @@
+"""Contact nodes and their normals from the bodies' own nodal fields (ALGORITHM.md §4).
+
+Every body b has, on its node box of the common lattice,
+    m_I^b = Σ_{p∈b} N_I(x_p) m_p,     g_I^b = Σ_{p∈b} m_p ∇N_I(x_p)   (outward from b).
+A contact node is a lattice node where two bodies α < β both carry mass above a threshold
+(a fraction of the body's heaviest point); one contact per body pair at a node, so three
+bodies at a node give three contacts. The unit normal points from β into α:
+    n = (g^β − g^α) / ‖g^β − g^α‖.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from softgrains.grid.lattice import Lattice, NodeBox
+from softgrains.grid.stencils import BodyStencils
+
+CONTACT_MASS_FRACTION = 1e-4
+
+
+@dataclass(frozen=True)
+class NodalField:
+    """One body's nodal mass and mass gradient on its node box (local node order)."""
+
+    body: int
+    box: NodeBox
+    mass: np.ndarray  # (n_box,)
+    gradient: np.ndarray  # (n_box, d)
+    threshold: float
+
+
+@dataclass(frozen=True)
+class ContactNodes:
+    """One row per (node, body pair): global node index, α, β, unit normal from β into α,
+    and the local node index of that node in α's and in β's box."""
+
+    node: np.ndarray
+    alpha: np.ndarray
+    beta: np.ndarray
+    normal: np.ndarray
+    local_alpha: np.ndarray
+    local_beta: np.ndarray
+
+    def __len__(self) -> int:
+        return self.node.size
+
+
+@njit(cache=True)
+def _mass_and_gradient(nodes, N, dN, mass, m_I, g_I):
+    n, ns = nodes.shape
+    d = dN.shape[2]
+    m_I[:] = 0.0
+    g_I[:, :] = 0.0
+    for p in range(n):
+        for k in range(ns):
+            I = nodes[p, k]
+            m_I[I] += N[p, k] * mass[p]
+            for j in range(d):
+                g_I[I, j] += mass[p] * dN[p, k, j]
+
+
+def nodal_field(body: int, stencils: BodyStencils, mass: np.ndarray) -> NodalField:
+    """m_I and g_I of one body from its points' stencils and masses."""
+    n_box = stencils.box.size
+    m_I = np.empty(n_box)
+    g_I = np.empty((n_box, stencils.dN.shape[2]))
+    _mass_and_gradient(stencils.nodes, stencils.N, stencils.dN, mass, m_I, g_I)
+    return NodalField(body, stencils.box, m_I, g_I, CONTACT_MASS_FRACTION * float(mass.max()))
+
+
+def global_node_index(lattice: Lattice, box: NodeBox) -> np.ndarray:
+    """Index on the common lattice (axis 0 fastest) of every node of a box, in local order."""
+    d = lattice.dim
+    local = np.arange(box.size)
+    index = np.zeros(box.size, dtype=np.int64)
+    stride = 1
+    for j in range(d):
+        index += (box.lower[j] + local % box.shape[j]) * stride
+        local //= box.shape[j]
+        stride *= int(lattice.n_nodes[j])
+    return index
+
+
+def find_contact_nodes(lattice: Lattice, fields: list[NodalField]) -> ContactNodes:
+    """All (node, α, β) with both bodies' mass above their thresholds, and their normals."""
+    ids, bodies, locals_ = [], [], []
+    for k, f in enumerate(fields):
+        heavy = np.flatnonzero(f.mass > f.threshold)
+        ids.append(global_node_index(lattice, f.box)[heavy])
+        bodies.append(np.full(heavy.size, k))
+        locals_.append(heavy)
+    d = lattice.dim
+    empty = ContactNodes(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64),
+                         np.zeros((0, d)), np.zeros(0, np.int64), np.zeros(0, np.int64))
+    if not ids:
+        return empty
+    ids, bodies, locals_ = (np.concatenate(a) for a in (ids, bodies, locals_))
+    order = np.lexsort((bodies, ids))
+    ids, bodies, locals_ = ids[order], bodies[order], locals_[order]
+    starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
+    counts = np.diff(np.r_[starts, ids.size])
+    rows = []
+    for s, c in zip(starts[counts > 1], counts[counts > 1], strict=True):
+        for a in range(s, s + c):
+            for b in range(a + 1, s + c):
+                rows.append((a, b))
+    if not rows:
+        return empty
+    a, b = np.array(rows).T
+    ka, kb = bodies[a], bodies[b]
+    g_a = np.array([fields[k].gradient[i] for k, i in zip(ka, locals_[a], strict=True)])
+    g_b = np.array([fields[k].gradient[i] for k, i in zip(kb, locals_[b], strict=True)])
+    diff = g_b - g_a
+    normal = diff / np.linalg.norm(diff, axis=1, keepdims=True)
+    return ContactNodes(ids[a], np.array([fields[k].body for k in ka]),
+                        np.array([fields[k].body for k in kb]), normal, locals_[a], locals_[b])

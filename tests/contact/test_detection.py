@@ -1,0 +1,52 @@
+"""Contact nodes and normals (ALGORITHM.md §4, VALIDATION.md B5, first part)."""
+
+import numpy as np
+import pytest
+
+from softgrains.contact import find_contact_nodes, nodal_field
+from softgrains.geometry import Disk, Rectangle, seed_points
+from softgrains.grid.lattice import Lattice
+from softgrains.grid.stencils import body_stencils
+
+H = 0.1
+LAT = Lattice.covering([0.0, 0.0], [3.0, 3.0], H)
+
+
+def _field(index, shape, kind=0):
+    x, v0 = seed_points(shape, LAT.domain_lower, H, 2)
+    return nodal_field(index, body_stencils(LAT, kind, x), np.full(len(x), 1000.0 * v0)), x
+
+
+@pytest.mark.parametrize("kind", [0, 1], ids=["linear", "bspline2"])
+def test_normals_of_two_half_planes_point_from_beta_into_alpha(kind):
+    """Two blocks a quarter cell apart: every contact normal satisfies
+    n·(centroid_α − centroid_β) > 0, and away from the corners n = (−1, 0)."""
+    fa, xa = _field(0, Rectangle(np.array([0.5, 0.5]), np.array([1.5, 2.5])), kind)
+    fb, xb = _field(1, Rectangle(np.array([1.525, 0.5]), np.array([2.5, 2.5])), kind)
+    contacts = find_contact_nodes(LAT, [fa, fb])
+    assert len(contacts) > 0
+    assert np.all(contacts.alpha == 0) and np.all(contacts.beta == 1)
+    towards_alpha = xa.mean(axis=0) - xb.mean(axis=0)
+    assert np.all(contacts.normal @ towards_alpha > 0)
+    ny = LAT.node_origin[1] + H * (contacts.node // LAT.n_nodes[0])
+    middle = (ny > 0.8) & (ny < 2.2)
+    assert np.allclose(contacts.normal[middle], [-1.0, 0.0], atol=1e-12)
+    assert np.allclose(np.linalg.norm(contacts.normal, axis=1), 1.0)
+
+
+def test_separated_bodies_have_no_contact_node():
+    fa, _ = _field(0, Disk(np.array([1.0, 1.5]), 0.3))
+    fb, _ = _field(1, Disk(np.array([2.0, 1.5]), 0.3))
+    assert len(find_contact_nodes(LAT, [fa, fb])) == 0
+
+
+def test_three_bodies_at_one_node_give_three_contacts():
+    """Three blocks meeting near the node (1.5, 1.5): one contact per pair at that node."""
+    fa, _ = _field(0, Rectangle(np.array([1.0, 1.0]), np.array([1.48, 1.48])))
+    fb, _ = _field(1, Rectangle(np.array([1.52, 1.0]), np.array([2.0, 1.48])))
+    fc, _ = _field(2, Rectangle(np.array([1.0, 1.52]), np.array([2.0, 2.0])))
+    contacts = find_contact_nodes(LAT, [fa, fb, fc])
+    i, j = np.rint((np.array([1.5, 1.5]) - LAT.node_origin) / H).astype(int)
+    at_node = contacts.node == i + j * LAT.n_nodes[0]
+    pairs = sorted(zip(contacts.alpha[at_node], contacts.beta[at_node], strict=True))
+    assert pairs == [(0, 1), (0, 2), (1, 2)]
