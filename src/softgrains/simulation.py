@@ -30,7 +30,7 @@ from softgrains.model import build
 from softgrains.observe.bodies import body_columns, body_records
 from softgrains.observe.energies import kinetic_energy, strain_energy
 from softgrains.observe.stress import von_mises
-from softgrains.solver import Solver, StepDiagnostics, total_momentum
+from softgrains.solver import Solver, StepDiagnostics
 
 SERIES_COLUMNS = [
     "step", "time", "dt", "newton_iterations", "contact_iterations", "contact_residual",
@@ -59,13 +59,14 @@ class Simulation:
     # -- observables -------------------------------------------------------------------
     def series_row(self, wall_time: float = 0.0) -> dict[str, object]:
         m, s, dg = self.model, self.state, self.last_diagnostics
-        ek = kinetic_energy(m.mass, s.v)
         deformable = np.concatenate([np.arange(b.points.start, b.points.stop)
                                      for b in m.bodies if b.deformable] or [np.arange(0)])
+        # energies and momentum of the deformable bodies (kinematic walls are driven)
+        ek = kinetic_energy(m.mass[deformable], s.v[deformable])
         es = strain_energy(m.law[deformable], s.F[deformable], m.lam[deformable],
                            m.mu[deformable], m.vol0[deformable])
         eg = -float(np.sum(m.mass[deformable] * (s.x[deformable] @ m.gravity)))
-        mom = total_momentum(m, s)
+        mom = (m.mass[deformable, None] * s.v[deformable]).sum(axis=0)
         residual = max((r.residuals[-1] for r in dg.bodies.values() if r.residuals), default=0.0)
         return {
             "step": s.step, "time": s.time, "dt": self.dt,

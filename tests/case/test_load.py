@@ -313,3 +313,11 @@ def test_mutated_valid_cases_give_a_case_or_a_case_error(data: st.DataObject) ->
 )
 def test_junk_overrides_give_a_case_or_a_case_error(overrides: list[str]) -> None:
     loads_or_case_error(rich_case(), overrides)
+
+
+def test_consistent_mass_with_one_point_per_cell_is_refused() -> None:
+    case = minimal_case()
+    case["simulation"]["mass_matrix"] = "consistent"
+    case["grid"]["points_per_cell"] = 1
+    with pytest.raises(CaseError, match=r"\[simulation.mass_matrix\].*points_per_cell"):
+        load_case(case)

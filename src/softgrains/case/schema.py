@@ -278,6 +278,10 @@ class Case(_Section):
         if not problems:  # the other checks rely on vectors of the right length
             problems = self._reference_problems() + self._geometry_problems()
             problems += self._size_problems()
+        if self.simulation.mass_matrix == "consistent" and self.grid.points_per_cell < 2:
+            message = ('needs grid.points_per_cell >= 2: with one point per cell the '
+                       'consistent mass matrix is singular; use "lumped"')
+            problems.append(Problem(("simulation", "mass_matrix"), "consistent", message))
         if problems:
             raise Problems(problems)
         return self

@@ -114,6 +114,12 @@ def find_contact_nodes(lattice: Lattice, fields: list[NodalField]) -> ContactNod
     g_a = np.array([fields[k].gradient[i] for k, i in zip(ka, locals_[a], strict=True)])
     g_b = np.array([fields[k].gradient[i] for k, i in zip(kb, locals_[b], strict=True)])
     diff = g_b - g_a
-    normal = diff / np.linalg.norm(diff, axis=1, keepdims=True)
-    return ContactNodes(ids[a], np.array([fields[k].body for k in ka]),
-                        np.array([fields[k].body for k in kb]), normal, locals_[a], locals_[b])
+    length = np.linalg.norm(diff, axis=1)
+    # no normal where the two gradients cancel (e.g. deep overlap): no contact there
+    scale = np.maximum(np.linalg.norm(g_a, axis=1), np.linalg.norm(g_b, axis=1))
+    keep = length > 1e-12 * scale
+    a, b, ka, kb = a[keep], b[keep], ka[keep], kb[keep]
+    normal = diff[keep] / length[keep, None]
+    return ContactNodes(ids[a], np.array([fields[k].body for k in ka], dtype=np.int64),
+                        np.array([fields[k].body for k in kb], dtype=np.int64), normal,
+                        locals_[a], locals_[b])

@@ -29,6 +29,47 @@ def local_node_indices(base, lower, strides, s, out):
 
 
 @njit(cache=True)
+def restrict_to_active(nodes, N, dN, active_row):
+    """Remove inactive nodes from the points' stencils, keeping the interpolation consistent.
+
+    For a point touching inactive nodes (set D): N_k ← N_k / Σ_{k∉D} N_k and
+    ∇N_k ← ∇N_k + N_k/Σ_{k∉D} N_k · Σ_{j∈D} ∇N_j on the active entries, zero on D. The
+    weights still sum to 1 and the gradients to 0, so a rigid motion stays strain-free and
+    momentum transfers stay exact. Returns the number of points changed.
+    """
+    n, ns = nodes.shape
+    d = dN.shape[2]
+    changed = 0
+    for p in range(n):
+        w_active = 0.0
+        touches = False
+        for k in range(ns):
+            if active_row[nodes[p, k]] >= 0:
+                w_active += N[p, k]
+            else:
+                touches = True
+        if not touches:
+            continue
+        changed += 1
+        for j in range(d):
+            g_dropped = 0.0
+            for k in range(ns):
+                if active_row[nodes[p, k]] < 0:
+                    g_dropped += dN[p, k, j]
+            for k in range(ns):
+                if active_row[nodes[p, k]] >= 0:
+                    dN[p, k, j] += N[p, k] / w_active * g_dropped
+                else:
+                    dN[p, k, j] = 0.0
+        for k in range(ns):
+            if active_row[nodes[p, k]] >= 0:
+                N[p, k] /= w_active
+            else:
+                N[p, k] = 0.0
+    return changed
+
+
+@njit(cache=True)
 def particles_to_grid(nodes, N, mass, v, a, n_box, m_I, mv_I, ma_I):
     """Scatter mass, momentum and mass-weighted acceleration to the body's nodes."""
     n, ns = nodes.shape

@@ -35,6 +35,7 @@ from softgrains.grid.transfers import (
     UPDATE_PARTICLE_THETA,
     grid_to_particles,
     particles_to_grid,
+    restrict_to_active,
 )
 from softgrains.integrator.assembly import (
     add_block_mass,
@@ -51,7 +52,7 @@ from softgrains.integrator.assembly import (
 )
 from softgrains.integrator.linear_solvers import LinearSolver
 
-ACTIVE_MASS_FRACTION = 1e-4  # nodes lighter than this fraction of the heaviest point are inactive
+ACTIVE_MASS_FRACTION = 1e-4  # lighter nodes (fraction of the heaviest point) are removed
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
 CHUNKS_PER_THREAD = 8  # point chunks per thread in the parallel kernels
 MAX_LINE_SEARCH = 8  # halvings of a Newton update in the backtracking line search
@@ -191,10 +192,13 @@ class BodyStepper:
         n_act = active.size
         active_row = -np.ones(n_box, dtype=np.int64)
         active_row[active] = np.arange(n_act)
+        if restrict_to_active(nodes, N, dN, active_row):
+            particles_to_grid(nodes, N, pts.mass, pts.v, pts.a, n_box, m_I, mv_I, ma_I)
         m = m_I[active][:, None] * np.ones(d)  # lumped mass per dof
         p_n = mv_I[active]  # nodal momentum Σ N m v (= M v^n for either mass matrix)
         q_n = ma_I[active]  # Σ N m a (Newmark)
-        v_n = p_n / m  # lumped estimates (predictor; FLIP increments)
+        v_free = p_n / m  # unconstrained lumped velocity: the FLIP increment starts from it
+        v_n = v_free.copy()  # lumped estimates (predictor; FLIP increments)
         a_n = q_n / m if newmark else np.zeros_like(v_n)
         fixed, vbar = self._dirichlet(box, active)
         v_n[fixed] = vbar[fixed]
@@ -322,7 +326,7 @@ class BodyStepper:
                 a_new[active] = a1
             else:
                 v1 = (u / dt - (1.0 - st.theta) * v_n) / st.theta
-            v_old[active] = v_n
+            v_old[active] = v_free  # so that fixed nodes pass their prescribed velocity on
             v_new[active] = v1
         params = np.array([dt, st.flip, st.theta, st.beta, st.gamma])
         jmin = grid_to_particles(nodes, N, dN, u_box, v_old, v_new, a_new, update, params,
