@@ -268,6 +268,10 @@ class BodyStepper:
         lumped_diag = (m * c_m).ravel()
         result = BodyStepResult(iterations=0)
         f_int, jmin, w_int = internal_force(u, False)
+        if jmin <= 0.0:  # the predictor inverts a point: start from rest instead
+            u = np.zeros_like(u)
+            u[fixed] = dt * vbar[fixed]
+            f_int, jmin, w_int = internal_force(u, False)
         r = residual(u, f_int)
         rnorm = float(np.linalg.norm(r))
         pi = potential(u, w_int)
