@@ -9,7 +9,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import numpy as np
 from threadpoolctl import threadpool_limits
 
 from softgrains.integrator.implicit import BodyPoints, BodyStepper, BodyStepResult
@@ -65,7 +64,3 @@ class Solver:
         state.step += 1
         return diag
 
-
-def total_momentum(model: Model, state: State) -> np.ndarray:
-    """Σ_p m_p v_p over all points."""
-    return (model.mass[:, None] * state.v).sum(axis=0)
