@@ -110,6 +110,40 @@ class BodyStepResult:
     linear_iterations: int = 0
 
 
+def line_search(u, du, r, pi, internal_force, residual, potential):
+    """Backtracking along the Newton direction: u + α du, α = 1, ½, ¼, ...
+
+    The step equations are the stationarity of the incremental potential Π (R = ∇Π), so
+    the first α with no inverted point and either the Armijo decrease
+    Π(u + α du) ≤ Π(u) + 10⁻⁴ α R·du or a residual decrease ‖R‖ ≤ (1 − 10⁻⁴ α)‖R(u)‖ is
+    taken (the second test decides near convergence, where differences of Π drown in
+    round-off). If du is no descent direction (R·du ≥ 0) or no α within
+    MAX_LINE_SEARCH halvings qualifies, the admissible trial of lowest Π is taken (if every
+    trial inverts a point, the last one, which the caller reports).
+    """
+    slope = float(np.sum(r * du))
+    rnorm = float(np.linalg.norm(r))
+    alpha = 1.0
+    best = None
+    for _ in range(MAX_LINE_SEARCH + 1):
+        u_try = u + alpha * du
+        f_try, j_try, w_try = internal_force(u_try, False)
+        if j_try > 0.0:
+            pi_try = potential(u_try, w_try)
+            r_try = residual(u_try, f_try)
+            n_try = float(np.linalg.norm(r_try))
+            trial = (u_try, f_try, r_try, n_try, j_try, pi_try)
+            armijo = slope < 0.0 and pi_try <= pi + 1e-4 * alpha * slope
+            if np.isfinite(n_try) and (armijo or n_try <= (1.0 - 1e-4 * alpha) * rnorm):
+                return trial
+            if np.isfinite(n_try) and (best is None or pi_try < best[5]):
+                best = trial
+        alpha *= 0.5
+    if best is not None:
+        return best
+    return u_try, f_try, residual(u_try, f_try), float("nan"), j_try, float("nan")
+
+
 class BodyStepper:
     """Newton solver of one deformable body; keeps its linear-solver choice between steps."""
 
@@ -141,203 +175,218 @@ class BodyStepper:
                     vbar[inside, j] = c.velocity[j]
         return fixed, vbar
 
-    @staticmethod
-    def _line_search(u, du, r, pi, internal_force, residual, potential):
-        """Backtracking along the Newton direction: u + α du, α = 1, ½, ¼, ...
-
-        The step equations are the stationarity of the incremental potential Π (R = ∇Π), so
-        the first α with no inverted point and either the Armijo decrease
-        Π(u + α du) ≤ Π(u) + 10⁻⁴ α R·du or a residual decrease ‖R‖ ≤ (1 − 10⁻⁴ α)‖R(u)‖ is
-        taken (the second test decides near convergence, where differences of Π drown in
-        round-off). If du is no descent direction (R·du ≥ 0) or no α within
-        MAX_LINE_SEARCH halvings qualifies, the admissible trial of lowest Π is taken (if every
-        trial inverts a point, the last one, which the caller reports).
-        """
-        slope = float(np.sum(r * du))
-        rnorm = float(np.linalg.norm(r))
-        alpha = 1.0
-        best = None
-        for _ in range(MAX_LINE_SEARCH + 1):
-            u_try = u + alpha * du
-            f_try, j_try, w_try = internal_force(u_try, False)
-            if j_try > 0.0:
-                pi_try = potential(u_try, w_try)
-                r_try = residual(u_try, f_try)
-                n_try = float(np.linalg.norm(r_try))
-                trial = (u_try, f_try, r_try, n_try, j_try, pi_try)
-                armijo = slope < 0.0 and pi_try <= pi + 1e-4 * alpha * slope
-                if np.isfinite(n_try) and (armijo or n_try <= (1.0 - 1e-4 * alpha) * rnorm):
-                    return trial
-                if np.isfinite(n_try) and (best is None or pi_try < best[5]):
-                    best = trial
-            alpha *= 0.5
-        if best is not None:
-            return best
-        return u_try, f_try, residual(u_try, f_try), float("nan"), j_try, float("nan")
-
     # -- the step ----------------------------------------------------------------------
     def step(self, pts: BodyPoints, gravity: np.ndarray, dt: float, step: int) -> BodyStepResult:
-        st = self.settings
-        d = self.lattice.dim
-        newmark = st.kind == "newmark"
-        consistent = st.mass_matrix == "consistent"
-        stencils = body_stencils(self.lattice, self.shape_kind, pts.x, self.name, step)
-        box, nodes, N, dN = stencils.box, stencils.nodes, stencils.N, stencils.dN
-        n_box = box.size
+        """One implicit step of the body (points updated in place)."""
+        body_step = BodyStep(self, pts, gravity, dt, step)
+        while not body_step.converged():
+            body_step.newton_update()
+        return body_step.finish()
+
+
+class BodyStep:
+    """One body's implicit step in progress (ALGORITHM.md §3, §7).
+
+    Set-up (P2G, active nodes, Dirichlet values, R = c_m M u − b − s f^int) happens at
+    construction; :meth:`converged` records the residual and checks the stopping test;
+    :meth:`newton_update` makes one Newton iteration with line search; :meth:`finish` moves
+    the points (G2P). The contact loop (issue #3) will interleave its Gauss–Seidel sweeps
+    with :meth:`newton_update`, adding the impulses to ``b``.
+    """
+
+    def __init__(self, stepper: BodyStepper, pts: BodyPoints, gravity: np.ndarray, dt: float,
+                 step: int) -> None:
+        st = self.settings = stepper.settings
+        self.stepper, self.pts, self.dt, self.step = stepper, pts, dt, step
+        d = self.d = stepper.lattice.dim
+        self.newmark = st.kind == "newmark"
+        self.consistent = st.mass_matrix == "consistent"
+        stencils = body_stencils(stepper.lattice, stepper.shape_kind, pts.x, stepper.name, step)
+        self.box, self.nodes, self.N, self.dN = (stencils.box, stencils.nodes, stencils.N,
+                                                 stencils.dN)
+        nodes, N, dN = self.nodes, self.N, self.dN
+        n_box = self.box.size
         m_I = np.empty(n_box)
         mv_I = np.empty((n_box, d))
         ma_I = np.empty((n_box, d))
         particles_to_grid(nodes, N, pts.mass, pts.v, pts.a, n_box, m_I, mv_I, ma_I)
-        active = np.flatnonzero(m_I > ACTIVE_MASS_FRACTION * pts.mass.max())
+        active = self.active = np.flatnonzero(m_I > ACTIVE_MASS_FRACTION * pts.mass.max())
         n_act = active.size
         active_row = -np.ones(n_box, dtype=np.int64)
         active_row[active] = np.arange(n_act)
         if restrict_to_active(nodes, N, dN, active_row):
             particles_to_grid(nodes, N, pts.mass, pts.v, pts.a, n_box, m_I, mv_I, ma_I)
-        m = m_I[active][:, None] * np.ones(d)  # lumped mass per dof
+        m = self.m = m_I[active][:, None] * np.ones(d)  # lumped mass per dof
         p_n = mv_I[active]  # nodal momentum Σ N m v (= M v^n for either mass matrix)
         q_n = ma_I[active]  # Σ N m a (Newmark)
-        v_free = p_n / m  # unconstrained lumped velocity: the FLIP increment starts from it
-        v_n = v_free.copy()  # lumped estimates (predictor; FLIP increments)
-        a_n = q_n / m if newmark else np.zeros_like(v_n)
-        fixed, vbar = self._dirichlet(box, active)
+        self.v_free = p_n / m  # unconstrained lumped velocity: FLIP increments start from it
+        v_n = self.v_n = self.v_free.copy()  # lumped estimate (predictor, FLIP)
+        a_n = self.a_n = q_n / m if self.newmark else np.zeros_like(v_n)
+        fixed, vbar = self.fixed, self.vbar = stepper._dirichlet(self.box, active)
         v_n[fixed] = vbar[fixed]
         a_n[fixed] = 0.0
-        if not consistent:
+        if not self.consistent:
             p_n = m * v_n
             q_n = m * a_n
         f_ext = m * gravity
 
-        indptr, indices, slot, diag_slot = block_pattern(active_row, box.shape, self.s)
-        ptr, entries = node_point_map(nodes, active_row, n_act)
-        n_chunks = CHUNKS_PER_THREAD * numba.get_num_threads()
-        Pv = np.empty((nodes.shape[0], d, d))
-        Av = np.empty((nodes.shape[0], d, d, d, d))
-        data = np.empty((indices.size, d, d))
-        f_int = np.empty((n_act, d))
-        u_box = np.zeros((n_box, d))
-        F_n = pts.F.copy()
-        vol_n = pts.vol.copy()
-        if consistent:
-            m_blocks = np.empty(indices.size)
-            gather_consistent_mass(ptr, entries, N, pts.mass, slot, self.codes, m_blocks)
-            Mu = np.empty((n_act, d))
-
-        def mass_times(u):
-            if not consistent:
-                return m * u
-            block_scalar_matvec(indptr, indices, m_blocks, u, Mu)
-            return Mu
-
-        def internal_force(u, want_tangent):
-            """f^int(u) on the active nodes (and K in `data` if want_tangent); min J, W(u)."""
-            u_box[active] = u
-            jmin, w_int = point_stresses(nodes, dN, u_box, F_n, vol_n, pts.law, pts.lam, pts.mu,
-                                  Pv, Av, want_tangent, n_chunks)
-            if jmin > 0.0:
-                gather_forces(ptr, entries, dN, Pv, f_int)
-                if want_tangent:
-                    gather_tangent(ptr, entries, dN, Av, slot, self.codes, data)
-            return f_int.copy(), jmin, w_int
+        self.indptr, self.indices, self.slot, self.diag_slot = block_pattern(
+            active_row, self.box.shape, stepper.s)
+        self.ptr, self.entries = node_point_map(nodes, active_row, n_act)
+        self.n_chunks = CHUNKS_PER_THREAD * numba.get_num_threads()
+        self.Pv = np.empty((nodes.shape[0], d, d))
+        self.Av = np.empty((nodes.shape[0], d, d, d, d))
+        self.data = np.empty((self.indices.size, d, d))
+        self.f_int = np.empty((n_act, d))
+        self.u_box = np.zeros((n_box, d))
+        self.F_n = pts.F.copy()
+        self.vol_n = pts.vol.copy()
+        if self.consistent:
+            self.m_blocks = np.empty(self.indices.size)
+            gather_consistent_mass(self.ptr, self.entries, N, pts.mass, self.slot,
+                                   stepper.codes, self.m_blocks)
+            self._Mu = np.empty((n_act, d))
 
         # R(u) = c_m M u − b − s f^int(u) = ∇Π(u),  Π(u) = ½ c_m uᵀMu − b·u + s W(u)
-        f_int_n, _, _ = internal_force(np.zeros_like(v_n), False)
-        if newmark:  # M a^{n+1} − F^{n+1}
-            c_m = 1.0 / (st.beta * dt * dt)
-            s_f = 1.0
-            b = c_m * (dt * p_n + (0.5 - st.beta) * dt * dt * q_n) + f_ext
+        f_int_n, _, _ = self.internal_force(np.zeros_like(v_n), False)
+        if self.newmark:  # M a^{n+1} − F^{n+1}
+            self.c_m = 1.0 / (st.beta * dt * dt)
+            self.s_f = 1.0
+            self.b = self.c_m * (dt * p_n + (0.5 - st.beta) * dt * dt * q_n) + f_ext
             u = dt * v_n + 0.5 * dt * dt * a_n
         else:  # M (v^{n+1} − v^n) − Δt[(1−θ)F^n + θF^{n+1}]
-            c_m = 1.0 / (st.theta * dt)
-            s_f = st.theta * dt
-            b = (c_m * (1.0 - st.theta) * dt + 1.0) * p_n + dt * (
+            self.c_m = 1.0 / (st.theta * dt)
+            self.s_f = st.theta * dt
+            self.b = (self.c_m * (1.0 - st.theta) * dt + 1.0) * p_n + dt * (
                 (1.0 - st.theta) * (f_int_n + f_ext) + st.theta * f_ext)
             u = dt * v_n
         u[fixed] = dt * vbar[fixed]
-
-        def residual(u, f_int):
-            r = c_m * mass_times(u) - b - s_f * f_int
-            r[fixed] = 0.0
-            return r
-
-        def potential(u, w_int):
-            return float(0.5 * c_m * np.sum(u * mass_times(u)) - np.sum(b * u) + s_f * w_int)
-
-        floor = RESIDUAL_FLOOR_DISPLACEMENT * self.lattice.h * c_m * np.linalg.norm(m)
-        fixed_flat = fixed.ravel()
-        lumped_diag = (m * c_m).ravel()
-        result = BodyStepResult(iterations=0)
-        f_int, jmin, w_int = internal_force(u, False)
+        self.floor = (RESIDUAL_FLOOR_DISPLACEMENT * stepper.lattice.h * self.c_m
+                      * np.linalg.norm(m))
+        self.result = BodyStepResult(iterations=0)
+        f_int, jmin, w_int = self.internal_force(u, False)
         if jmin <= 0.0:  # the predictor inverts a point: start from rest instead
             u = np.zeros_like(u)
             u[fixed] = dt * vbar[fixed]
-            f_int, jmin, w_int = internal_force(u, False)
-        r = residual(u, f_int)
-        rnorm = float(np.linalg.norm(r))
-        pi = potential(u, w_int)
-        r0 = rnorm
-        while True:
-            if not np.isfinite(rnorm) or jmin <= 0.0:
-                raise SimulationError(
-                    f"step {step}: Newton of body '{self.name}' produced "
-                    f"{'a non-finite residual' if jmin > 0 else 'an inverted point (J ≤ 0)'} "
-                    f"at iteration {result.iterations}; try a smaller dt or a finer grid.",
-                    step=step, body=self.name, residuals=result.residuals + [rnorm])
-            result.residuals.append(rnorm)
-            if rnorm <= max(st.tolerance * r0, floor):
-                break
-            if result.iterations >= st.max_iterations:
-                raise SimulationError(
-                    f"step {step}: Newton of body '{self.name}' did not converge in "
-                    f"{st.max_iterations} iterations (residual {rnorm:.3e}, first {r0:.3e}); "
-                    "try a smaller dt, more newton_max_iterations or a looser "
-                    "newton_tolerance.",
-                    step=step, body=self.name, residuals=result.residuals)
-            internal_force(u, True)
-            if s_f != 1.0:
-                data *= s_f
-            if consistent:
-                add_block_mass(data, m_blocks, c_m)
-            else:
-                add_diagonal(data, diag_slot, lumped_diag)
-            constrain(data, indptr, indices, fixed_flat)
-            A = sp.bsr_matrix((data, indices, indptr), shape=(lumped_diag.size,) * 2)
-            try:
-                du = self.solver.solve(A, -r.ravel(), diag_slot).reshape(u.shape)
-            except (np.linalg.LinAlgError, RuntimeError) as err:
-                raise SimulationError(
-                    f"step {step}: linear solve of body '{self.name}' failed at Newton "
-                    f"iteration {result.iterations}: {err}", step=step, body=self.name,
-                    residuals=result.residuals) from err
-            result.iterations += 1
-            result.linear_method = self.solver.last_method
-            result.linear_iterations += self.solver.last_iterations
-            u, f_int, r, rnorm, jmin, pi = self._line_search(
-                u, du, r, pi, internal_force, residual, potential)
+            f_int, jmin, w_int = self.internal_force(u, False)
+        self.u, self.jmin = u, jmin
+        self.r = self.residual(u, f_int)
+        self.rnorm = self.r0 = float(np.linalg.norm(self.r))
+        self.pi = self.potential(u, w_int)
 
-        u_box[:] = 0.0
+    # -- the step equations ------------------------------------------------------------
+    def mass_times(self, u: np.ndarray) -> np.ndarray:
+        if not self.consistent:
+            return self.m * u
+        block_scalar_matvec(self.indptr, self.indices, self.m_blocks, u, self._Mu)
+        return self._Mu
+
+    def internal_force(self, u: np.ndarray, want_tangent: bool):
+        """f^int(u) on the active nodes (and K in ``data`` if want_tangent); min J, W(u)."""
+        self.u_box[self.active] = u
+        pts = self.pts
+        jmin, w_int = point_stresses(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n,
+                                     pts.law, pts.lam, pts.mu, self.Pv, self.Av, want_tangent,
+                                     self.n_chunks)
+        if jmin > 0.0:
+            gather_forces(self.ptr, self.entries, self.dN, self.Pv, self.f_int)
+            if want_tangent:
+                gather_tangent(self.ptr, self.entries, self.dN, self.Av, self.slot,
+                               self.stepper.codes, self.data)
+        return self.f_int.copy(), jmin, w_int
+
+    def residual(self, u: np.ndarray, f_int: np.ndarray) -> np.ndarray:
+        r = self.c_m * self.mass_times(u) - self.b - self.s_f * f_int
+        r[self.fixed] = 0.0
+        return r
+
+    def potential(self, u: np.ndarray, w_int: float) -> float:
+        return float(0.5 * self.c_m * np.sum(u * self.mass_times(u)) - np.sum(self.b * u)
+                     + self.s_f * w_int)
+
+    # -- Newton ------------------------------------------------------------------------
+    def converged(self) -> bool:
+        """Record the current residual; True when it passes the stopping test.
+
+        Raises SimulationError on a non-finite residual, an inverted point or too many
+        iterations.
+        """
+        res, st, name, step = self.result, self.settings, self.stepper.name, self.step
+        if not np.isfinite(self.rnorm) or self.jmin <= 0.0:
+            what = "a non-finite residual" if self.jmin > 0 else "an inverted point (J ≤ 0)"
+            raise SimulationError(
+                f"step {step}: Newton of body '{name}' produced {what} at iteration "
+                f"{res.iterations}; try a smaller dt or a finer grid.",
+                step=step, body=name, residuals=res.residuals + [self.rnorm])
+        res.residuals.append(self.rnorm)
+        if self.rnorm <= max(st.tolerance * self.r0, self.floor):
+            return True
+        if res.iterations >= st.max_iterations:
+            raise SimulationError(
+                f"step {step}: Newton of body '{name}' did not converge in "
+                f"{st.max_iterations} iterations (residual {self.rnorm:.3e}, first "
+                f"{self.r0:.3e}); try a smaller dt, more newton_max_iterations or a looser "
+                "newton_tolerance.", step=step, body=name, residuals=res.residuals)
+        return False
+
+    def newton_update(self) -> None:
+        """One Newton iteration: tangent, linear solve, line search."""
+        self.internal_force(self.u, True)
+        data = self.data
+        if self.s_f != 1.0:
+            data *= self.s_f
+        if self.consistent:
+            add_block_mass(data, self.m_blocks, self.c_m)
+        else:
+            add_diagonal(data, self.diag_slot, (self.m * self.c_m).ravel())
+        constrain(data, self.indptr, self.indices, self.fixed.ravel())
+        size = self.u.size
+        A = sp.bsr_matrix((data, self.indices, self.indptr), shape=(size, size))
+        solver, res = self.stepper.solver, self.result
+        try:
+            du = solver.solve(A, -self.r.ravel(), self.diag_slot).reshape(self.u.shape)
+        except (np.linalg.LinAlgError, RuntimeError) as err:
+            raise SimulationError(
+                f"step {self.step}: linear solve of body '{self.stepper.name}' failed at "
+                f"Newton iteration {res.iterations}: {err}", step=self.step,
+                body=self.stepper.name, residuals=res.residuals) from err
+        res.iterations += 1
+        res.linear_method = solver.last_method
+        res.linear_iterations += solver.last_iterations
+        self.u, _, self.r, self.rnorm, self.jmin, self.pi = line_search(
+            self.u, du, self.r, self.pi, self.internal_force, self.residual, self.potential)
+
+    # -- G2P ---------------------------------------------------------------------------
+    def finish(self) -> BodyStepResult:
+        """Move the points with the converged solution (G2P) and return the diagnostics."""
+        st, d, dt, u, active = self.settings, self.d, self.dt, self.u, self.active
+        n_box = self.box.size
+        u_box = np.zeros((n_box, d))
         u_box[active] = u
         v_old = np.zeros((n_box, d))
         v_new = np.zeros((n_box, d))
         a_new = np.zeros((n_box, d))
-        if consistent:
-            update = UPDATE_PARTICLE_NEWMARK if newmark else UPDATE_PARTICLE_THETA
+        if self.consistent:
+            update = UPDATE_PARTICLE_NEWMARK if self.newmark else UPDATE_PARTICLE_THETA
         else:
-            update = UPDATE_FLIP_NEWMARK if newmark else UPDATE_FLIP_THETA
-            if newmark:
-                a1 = c_m * (u - dt * v_n) - (0.5 / st.beta - 1.0) * a_n
+            update = UPDATE_FLIP_NEWMARK if self.newmark else UPDATE_FLIP_THETA
+            v_n, a_n = self.v_n, self.a_n
+            if self.newmark:
+                a1 = self.c_m * (u - dt * v_n) - (0.5 / st.beta - 1.0) * a_n
                 v1 = v_n + dt * ((1.0 - st.gamma) * a_n + st.gamma * a1)
                 a_new[active] = a1
             else:
                 v1 = (u / dt - (1.0 - st.theta) * v_n) / st.theta
-            v_old[active] = v_free  # so that fixed nodes pass their prescribed velocity on
+            v_old[active] = self.v_free  # so that fixed nodes pass their velocity on
             v_new[active] = v1
         params = np.array([dt, st.flip, st.theta, st.beta, st.gamma])
-        jmin = grid_to_particles(nodes, N, dN, u_box, v_old, v_new, a_new, update, params,
-                                 pts.law, pts.lam, pts.mu, pts.vol0, pts.x, pts.v, pts.a,
-                                 pts.F, pts.sigma, pts.vol, n_chunks)
+        pts = self.pts
+        jmin = grid_to_particles(self.nodes, self.N, self.dN, u_box, v_old, v_new, a_new,
+                                 update, params, pts.law, pts.lam, pts.mu, pts.vol0, pts.x,
+                                 pts.v, pts.a, pts.F, pts.sigma, pts.vol, self.n_chunks)
         if jmin <= 0.0:
             raise SimulationError(
-                f"step {step}: body '{self.name}' has an inverted point (J = {jmin:.3e}); "
-                "try a smaller dt or a finer grid.", step=step, body=self.name)
-        return result
+                f"step {self.step}: body '{self.stepper.name}' has an inverted point "
+                f"(J = {jmin:.3e}); try a smaller dt or a finer grid.",
+                step=self.step, body=self.stepper.name)
+        return self.result
