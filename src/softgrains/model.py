@@ -53,6 +53,7 @@ class Model:
     gravity: np.ndarray
     integrator: IntegratorSettings
     constraints: dict[int, list[DirichletBox]] = field(default_factory=dict)
+    contact: object = None  # the case's [contact] settings
 
     @property
     def n_points(self) -> int:
@@ -139,7 +140,7 @@ def build(case) -> tuple[Model, State]:
         points_per_cell=grid.points_per_cell, bodies=bodies, mass=np.concatenate(masses),
         vol0=np.concatenate(vols), body_id=np.concatenate(ids), law=np.concatenate(laws),
         lam=np.concatenate(lams), mu=np.concatenate(mus), gravity=gravity, integrator=settings,
-        constraints=_constraints(case, bodies, dim))
+        constraints=_constraints(case, bodies, dim), contact=case.contact)
     state = State(
         time=0.0, step=0, x=x, v=np.concatenate(vs), a=np.zeros((n, dim)),
         F=np.tile(np.eye(dim), (n, 1, 1)), sigma=np.zeros((n, 3, 3)),

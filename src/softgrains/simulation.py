@@ -70,8 +70,10 @@ class Simulation:
         residual = max((r.residuals[-1] for r in dg.bodies.values() if r.residuals), default=0.0)
         return {
             "step": s.step, "time": s.time, "dt": self.dt,
-            "newton_iterations": dg.newton_iterations, "contact_iterations": 0,
-            "contact_residual": 0.0, "n_contacts": 0, "kinetic_energy": ek,
+            "newton_iterations": dg.newton_iterations,
+            "contact_iterations": dg.contact.iterations,
+            "contact_residual": dg.contact.residual, "n_contacts": dg.contact.active,
+            "kinetic_energy": ek,
             "strain_energy": es, "gravity_energy": eg, "total_energy": ek + es + eg,
             "momentum_x": mom[0], "momentum_y": mom[1], "newton_residual": residual,
             "linear_solver": dg.linear_method or "-", "wall_time": wall_time,
@@ -127,7 +129,9 @@ class Simulation:
             self._rows.append(row)
             if series is not None:
                 series.append(row)
-                for r in body_records(self.model, self.state):
+                forces = self.last_diagnostics.contact_forces(
+                    len(self.model.bodies), self.model.dim, self.dt)
+                for r in body_records(self.model, self.state, forces):
                     bodies.append(r)
             return row
 

@@ -9,9 +9,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
 from threadpoolctl import threadpool_limits
 
-from softgrains.integrator.implicit import BodyPoints, BodyStepper, BodyStepResult
+from softgrains.contact.coupling import ContactDiagnostics, ContactState, solve_coupled
+from softgrains.contact.detection import nodal_field
+from softgrains.grid.stencils import BodyStencils, body_stencils
+from softgrains.integrator.implicit import BodyPoints, BodyStep, BodyStepper, BodyStepResult
 from softgrains.model import Model, State
 
 
@@ -21,6 +25,17 @@ class StepDiagnostics:
 
     newton_iterations: int = 0
     bodies: dict[str, BodyStepResult] = field(default_factory=dict)
+    contact: ContactDiagnostics = field(default_factory=ContactDiagnostics)
+    contacts: ContactState | None = None
+
+    def contact_forces(self, n_bodies: int, dim: int, dt: float) -> np.ndarray:
+        """Total contact force each body received over the step: Σ ±P/Δt (B, d)."""
+        forces = np.zeros((n_bodies, dim))
+        if self.contacts is not None and len(self.contacts.nodes):
+            c = self.contacts
+            np.add.at(forces, c.nodes.alpha, c.impulse / dt)
+            np.add.at(forces, c.nodes.beta, -c.impulse / dt)
+        return forces
 
     @property
     def linear_method(self) -> str:
@@ -48,12 +63,35 @@ class Solver:
                           vol0=m.vol0[sl], law=m.law[sl], lam=m.lam[sl], mu=m.mu[sl])
 
     def step(self, state: State, dt: float) -> StepDiagnostics:
-        """Advance the state by dt in place."""
+        """Advance the state by dt in place (bodies coupled by contact when enabled)."""
+        model = self.model
         diag = StepDiagnostics()
-        for body in self.model.bodies:
+        steps = {b.index: BodyStep(self.steppers[b.index], self.body_points(state, b.index),
+                                   model.gravity, dt, state.step)
+                 for b in model.bodies if b.deformable}
+        contact = model.contact
+        if contact is not None and contact.enabled and len(model.bodies) > 1:
+            fields = []
+            for b in model.bodies:
+                if b.deformable:
+                    s = steps[b.index]
+                    stencils = BodyStencils(s.box, s.nodes, s.N, s.dN)
+                else:
+                    stencils = body_stencils(model.lattice, model.shape_kind,
+                                             state.x[b.points], b.name, state.step)
+                fields.append(nodal_field(b.index, stencils, model.mass[b.points]))
+            walls = {b.index: state.body_velocity[b.index]
+                     for b in model.bodies if not b.deformable}
+            diag.contacts, diag.contact = solve_coupled(
+                model.lattice, steps, fields, walls, contact.friction, contact.tolerance,
+                contact.max_iterations, state.step)
+        else:
+            for s in steps.values():
+                while not s.converged():
+                    s.newton_update()
+        for body in model.bodies:
             if body.deformable:
-                res = self.steppers[body.index].step(
-                    self.body_points(state, body.index), self.model.gravity, dt, state.step)
+                res = steps[body.index].finish()
                 diag.bodies[body.name] = res
                 diag.newton_iterations = max(diag.newton_iterations, res.iterations)
             else:

@@ -83,7 +83,7 @@ def message_of(data: dict, overrides: object = None) -> str:
         ({"grid.size": [1.0, -1.0]}, "[grid.size.1] = -1.0: must be > 0"),
         ({"grid.origin": [0.0]}, "[grid.origin] = [0.0]: must have 2 entries (one per axis)"),
         ({"output.progress": 1}, "[output.progress] = 1: must be true or false, not an integer"),
-        ({"contact": {"friction": 0.5}}, "[contact]: unknown key; expected one of 'simulation'"),
+        ({"sample": {"count": 30}}, "[sample]: unknown key; expected one of 'simulation'"),
         ({"bodies.0.radius": None}, "[bodies.0.radius]: required for shape = 'disk'"),
         ({"bodies.0.lower": [0, 0]}, "[bodies.0.lower] = [0.0, 0.0]: only for shape = 'rectangle'"),
         (
@@ -200,7 +200,7 @@ def test_overrides_as_a_dict_take_python_values_without_mutating_the_input() -> 
     ("override", "expected"),
     [
         ("simulation.dtt=1", "[simulation.dtt]: unknown key; did you mean 'dt'?"),
-        ("contact.friction=0.5", "[contact]: unknown key"),
+        ("sample.count=30", "[sample]: unknown key"),
         ("bodies.1.radius=0.1", "'1' is not an index of [bodies], an array of length 1"),
         ("bodies.x.radius=0.1", "'x' is not an index of [bodies]"),
         ("simulation.dt.x=1", "[simulation.dt] = 0.001 is not a table or an array"),

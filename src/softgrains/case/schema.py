@@ -251,6 +251,15 @@ class Gravity(_Section):
     acceleration: list[float] = Field(default_factory=_zero_vector, description="[m/s^2]")
 
 
+class ContactSettings(_Section):
+    """``[contact]``: frictional contact between bodies (Contact Dynamics)."""
+
+    enabled: bool = Field(True, description="contact between bodies on or off")
+    friction: float = Field(0.0, ge=0.0, le=10.0, description="Coulomb coefficient (global)")
+    tolerance: float = Field(1e-6, gt=0.0, lt=1.0, description="relative impulse change")
+    max_iterations: int = Field(500, ge=1, le=100000, description="Gauss-Seidel sweeps")
+
+
 class OutputSettings(_Section):
     """``[output]``: what is written, and how often."""
 
@@ -268,6 +277,7 @@ class Case(_Section):
     bodies: list[Body] = Field(min_length=1)
     boundary: list[Boundary] = Field(default_factory=list)
     gravity: Gravity = Field(default_factory=Gravity)
+    contact: ContactSettings = Field(default_factory=ContactSettings)
     output: OutputSettings = Field(default_factory=OutputSettings)
 
     @model_validator(mode="after")

@@ -212,7 +212,7 @@ class BodyStep:
         particles_to_grid(nodes, N, pts.mass, pts.v, pts.a, n_box, m_I, mv_I, ma_I)
         active = self.active = np.flatnonzero(m_I > ACTIVE_MASS_FRACTION * pts.mass.max())
         n_act = active.size
-        active_row = -np.ones(n_box, dtype=np.int64)
+        active_row = self.active_row = -np.ones(n_box, dtype=np.int64)
         active_row[active] = np.arange(n_act)
         if restrict_to_active(nodes, N, dN, active_row):
             particles_to_grid(nodes, N, pts.mass, pts.v, pts.a, n_box, m_I, mv_I, ma_I)
@@ -304,12 +304,45 @@ class BodyStep:
         return float(0.5 * self.c_m * np.sum(u * self.mass_times(u)) - np.sum(self.b * u)
                      + self.s_f * w_int)
 
+    # -- contact impulses (issue #3) ----------------------------------------------------
+    def node_velocity(self, rows: np.ndarray) -> np.ndarray:
+        """End-of-step velocity v^{n+1}(u) at active rows, from the current iterate u."""
+        st, dt, u = self.settings, self.dt, self.u[rows]
+        if self.newmark:
+            a1 = self.c_m * (u - dt * self.v_n[rows]) - (0.5 / st.beta - 1.0) * self.a_n[rows]
+            return self.v_n[rows] + dt * ((1.0 - st.gamma) * self.a_n[rows] + st.gamma * a1)
+        return (u / dt - (1.0 - st.theta) * self.v_n[rows]) / st.theta
+
+    def apply_impulse(self, row: int, dP: np.ndarray) -> None:
+        """Add a contact impulse change dP at an active row (−P in R, θ; −P/(γΔt), Newmark).
+
+        The iterate moves by the local relation (Δv^{n+1} = dP/m at that node), so that the
+        Gauss–Seidel sweep sees the new velocity at once; call :meth:`refresh` before the
+        next Newton update.
+        """
+        st, dt, m = self.settings, self.dt, self.m[row]
+        if self.newmark:
+            self.b[row] += dP / (st.gamma * dt)
+            self.u[row] += st.beta * dt * dt * dP / (st.gamma * dt * m)
+        else:
+            self.b[row] += dP
+            self.u[row] += st.theta * dt * dP / m
+        self.u[self.fixed] = dt * self.vbar[self.fixed]
+
+    def refresh(self) -> None:
+        """Recompute the residual and potential after impulses changed b and u."""
+        f_int, self.jmin, w_int = self.internal_force(self.u, False)
+        self.r = self.residual(self.u, f_int)
+        self.rnorm = float(np.linalg.norm(self.r))
+        self.pi = self.potential(self.u, w_int)
+
     # -- Newton ------------------------------------------------------------------------
-    def converged(self) -> bool:
+    def converged(self, limit: bool = True) -> bool:
         """Record the current residual; True when it passes the stopping test.
 
-        Raises SimulationError on a non-finite residual, an inverted point or too many
-        iterations.
+        Raises SimulationError on a non-finite residual, an inverted point or (when
+        ``limit``) more than newton_max_iterations iterations; the contact loop bounds the
+        iterations itself (limit=False).
         """
         res, st, name, step = self.result, self.settings, self.stepper.name, self.step
         if not np.isfinite(self.rnorm) or self.jmin <= 0.0:
@@ -321,7 +354,7 @@ class BodyStep:
         res.residuals.append(self.rnorm)
         if self.rnorm <= max(st.tolerance * self.r0, self.floor):
             return True
-        if res.iterations >= st.max_iterations:
+        if limit and res.iterations >= st.max_iterations:
             raise SimulationError(
                 f"step {step}: Newton of body '{name}' did not converge in "
                 f"{st.max_iterations} iterations (residual {self.rnorm:.3e}, first "

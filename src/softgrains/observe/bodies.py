@@ -2,7 +2,7 @@
 
     x_cm = Σ m_p x_p / Σ m_p,   v_cm = Σ m_p v_p / Σ m_p,
     E_k = ½ Σ m_p |v_p|²,       E_s = Σ V⁰_p W(F_p)
-The contact force a body receives is zero until the contact issue adds contacts.
+f is the total contact force the body received during the last step (Σ ±P/Δt).
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from softgrains.observe.energies import kinetic_energy, strain_energy
 AXES = "xyz"
 
 
-def body_records(model, state) -> list[dict[str, object]]:
-    """One row per body for the current state."""
+def body_records(model, state, forces=None) -> list[dict[str, object]]:
+    """One row per body for the current state; ``forces`` (B, d): contact force received."""
     rows = []
     for b in model.bodies:
         sl = b.points
@@ -28,7 +28,7 @@ def body_records(model, state) -> list[dict[str, object]]:
         for j in range(model.dim):
             row["v" + AXES[j]] = vc[j]
         for j in range(model.dim):
-            row["f" + AXES[j]] = 0.0
+            row["f" + AXES[j]] = 0.0 if forces is None else float(forces[b.index, j])
         row["kinetic_energy"] = kinetic_energy(m, state.v[sl])
         row["strain_energy"] = (strain_energy(model.law[sl], state.F[sl], model.lam[sl],
                                               model.mu[sl], model.vol0[sl])

@@ -1,0 +1,77 @@
+"""The coupled contact–bulk loop (ALGORITHM.md §6) on small cases (VALIDATION.md B5, B6).
+
+The gap treatment (§4) is not in yet: contacts act on mass overlap, about one cell early.
+"""
+
+import numpy as np
+
+from softgrains import Simulation, load_case
+
+
+def _two_disks(enabled=True):
+    """Sulsky et al. (1994): two elastic disks on the diagonal of a 1 m square, 20 x 20 cells."""
+    disk = {"shape": "disk", "radius": 0.2, "material": "gel"}
+    return load_case({
+        "simulation": {"dt": 0.01, "end_time": 3.0},
+        "grid": {"cell_size": 0.05, "origin": [0.0, 0.0], "size": [1.0, 1.0]},
+        "materials": {"gel": {"young": 1000.0, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [{**disk, "center": [0.2, 0.2], "velocity": [0.1, 0.1]},
+                   {**disk, "center": [0.8, 0.8], "velocity": [-0.1, -0.1]}],
+        "contact": {"enabled": enabled},
+    })
+
+
+def test_two_disks_collide_with_exact_momentum_and_no_energy_gain():
+    """Measured (2026-11-23): contact starts at 1.14 s on mass overlap (surfaces touch at
+    1.586 s: the gap treatment will fix the onset), the disks leave along the diagonal at
+    0.93 of their speed, momentum stays within 2e-14 of zero."""
+    sim = Simulation(_two_disks())
+    m = sim.model.mass
+    a = sim.model.bodies[0].points
+    e0 = sim.series_row()["total_energy"]
+    energies, momenta, onset = [], [], None
+    for _ in range(sim.n_steps):
+        diag = sim.step()
+        if onset is None and diag.contact.active:
+            onset = sim.state.time
+        energies.append(sim.series_row()["total_energy"])
+        momenta.append((m[:, None] * sim.state.v).sum(axis=0))
+    assert np.abs(momenta).max() < 1e-12 * m.sum() * 0.1
+    assert max(energies) <= e0 * (1 + 1e-9)
+    assert onset is not None and 1.0 < onset < 1.6
+    va = sim.state.v[a].mean(axis=0)
+    assert va[0] < -0.05 and va[1] < -0.05  # rebounded, back along the diagonal
+    assert abs(va[0] - va[1]) < 1e-6 * abs(va[0]) + 1e-12
+
+
+def test_without_contact_the_disks_pass_through_each_other():
+    sim = Simulation(_two_disks(enabled=False))
+    for _ in range(200):
+        sim.step()
+    assert np.allclose(sim.state.v[sim.model.bodies[0].points].mean(axis=0), [0.1, 0.1])
+
+
+def test_block_resting_on_a_wall_reports_a_constant_force_mg():
+    """An elastic block released just above a kinematic slab under gravity (θ = 1): once
+    settled, the slab pushes it with m g within 1% at every step (no chatter between 2mg
+    and 0). Measured: 0.994–1.003 mg over steps 50–60."""
+    case = load_case({
+        "simulation": {"dt": 0.01, "steps": 60, "theta": 1.0},
+        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
+        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [
+            {"name": "block", "shape": "rectangle", "lower": [0.6, 0.62],
+             "upper": [1.4, 1.02], "material": "gel"},
+            {"name": "slab", "shape": "rectangle", "lower": [0.2, 0.3], "upper": [1.8, 0.6],
+             "material": "gel", "kind": "kinematic"}],
+        "gravity": {"acceleration": [0.0, -10.0]},
+    })
+    sim = Simulation(case)
+    weight = 10.0 * sim.model.mass[sim.model.bodies[0].points].sum()
+    ratios = []
+    for _ in range(sim.n_steps):
+        diag = sim.step()
+        force = diag.contact_forces(2, 2, sim.dt)
+        ratios.append(force[0, 1] / weight)
+        assert np.allclose(force[0] + force[1], 0.0, atol=1e-9 * weight)  # action = reaction
+    assert np.abs(np.array(ratios[-10:]) - 1.0).max() < 0.01
