@@ -71,6 +71,7 @@ class State:
     sigma: np.ndarray
     vol: np.ndarray
     body_velocity: np.ndarray  # (B, d): prescribed velocity of kinematic bodies
+    body_offset: np.ndarray  # (B, d): rigid displacement of kinematic bodies since the start
 
 
 def make_shape(body) -> Shape:
@@ -145,7 +146,8 @@ def build(case) -> tuple[Model, State]:
         time=0.0, step=0, x=x, v=np.concatenate(vs), a=np.zeros((n, dim)),
         F=np.tile(np.eye(dim), (n, 1, 1)), sigma=np.zeros((n, 3, 3)),
         vol=model.vol0.copy(),
-        body_velocity=np.array([np.asarray(cb.velocity, dtype=float) for cb in case.bodies]))
+        body_velocity=np.array([np.asarray(cb.velocity, dtype=float) for cb in case.bodies]),
+        body_offset=np.zeros((len(case.bodies), dim)))
     return model, state
 
 

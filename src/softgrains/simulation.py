@@ -123,11 +123,6 @@ class Simulation:
             log.info("softgrains run: %d bodies, %d points, %d steps of dt = %g s, "
                      "integrator %s", len(self.model.bodies), self.model.n_points,
                      self.n_steps, self.dt, self.model.integrator.kind)
-            contact = self.case.contact
-            if contact.enabled and contact.friction > 0 and len(self.model.bodies) > 1:
-                log.warning("contact friction is not validated yet (issue #3: the incline "
-                            "test gives 2.28 instead of 3.21 m/s^2 at mu = 0.2); treat "
-                            "frictional results as provisional")
 
         def record(wall):
             row = self.series_row(wall)

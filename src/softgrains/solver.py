@@ -14,6 +14,7 @@ from threadpoolctl import threadpool_limits
 
 from softgrains.contact.coupling import ContactDiagnostics, ContactState, solve_coupled
 from softgrains.contact.detection import nodal_field
+from softgrains.geometry import translated
 from softgrains.grid.stencils import BodyStencils, body_stencils
 from softgrains.integrator.implicit import BodyPoints, BodyStep, BodyStepper, BodyStepResult
 from softgrains.model import Model, State
@@ -80,11 +81,12 @@ class Solver:
                     stencils = body_stencils(model.lattice, model.shape_kind,
                                              state.x[b.points], b.name, state.step)
                 fields.append(nodal_field(b.index, stencils, model.mass[b.points]))
-            walls = {b.index: state.body_velocity[b.index]
-                     for b in model.bodies if not b.deformable}
+            walls = [b for b in model.bodies if not b.deformable]
             diag.contacts, diag.contact = solve_coupled(
-                model.lattice, steps, fields, walls, contact.friction, contact.tolerance,
-                contact.max_iterations, state.step)
+                model.lattice, steps, fields,
+                {b.index: state.body_velocity[b.index] for b in walls},
+                {b.index: translated(b.shape, state.body_offset[b.index]) for b in walls},
+                contact.friction, contact.tolerance, contact.max_iterations, state.step)
         else:
             for s in steps.values():
                 while not s.converged():
@@ -98,6 +100,7 @@ class Solver:
                 vel = state.body_velocity[body.index]
                 state.x[body.points] += dt * vel
                 state.v[body.points] = vel
+                state.body_offset[body.index] += dt * vel
         state.time += dt
         state.step += 1
         return diag

@@ -4,6 +4,7 @@ The gap treatment (§4) is not in yet: contacts act on mass overlap, about one c
 """
 
 import numpy as np
+import pytest
 
 from softgrains import Simulation, load_case
 
@@ -75,3 +76,40 @@ def test_block_resting_on_a_wall_reports_a_constant_force_mg():
         ratios.append(force[0, 1] / weight)
         assert np.allclose(force[0] + force[1], 0.0, atol=1e-9 * weight)  # action = reaction
     assert np.abs(np.array(ratios[-10:]) - 1.0).max() < 0.01
+
+
+@pytest.mark.parametrize(("mu", "expected"), [(0.2, 3.206), (0.5, 0.657), (0.7, 0.0)])
+def test_block_on_an_incline_slides_with_the_coulomb_acceleration(mu, expected):
+    """VALIDATION.md B7: a block (0.8 × 0.4 m, E = 1 MPa, h = 0.1) on a fixed slab, gravity
+    tilted by 30°: a = g(sin θ − μ cos θ) from a quadratic fit of the centre-of-mass
+    displacement after 0.15 s. Measured (2026-11-23): 3.2059 (μ = 0.2), 0.6577 (μ = 0.5),
+    −0.002 m/s² (μ = 0.7: sticks). The exact face normal of the wall is what makes this
+    right: mass-gradient normals gave 2.28 m/s² at μ = 0.2 and stuck at μ = 0.5."""
+    g, tilt = 9.81, np.radians(30.0)
+    case = load_case({
+        "simulation": {"dt": 0.005, "steps": 80, "theta": 1.0},
+        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [4.0, 2.0]},
+        "materials": {"gel": {"young": 1e6, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [
+            {"name": "block", "shape": "rectangle", "lower": [0.6, 0.62],
+             "upper": [1.4, 1.02], "material": "gel"},
+            {"name": "slab", "shape": "rectangle", "lower": [0.2, 0.3], "upper": [3.8, 0.6],
+             "material": "gel", "kind": "kinematic"}],
+        "gravity": {"acceleration": [g * np.sin(tilt), -g * np.cos(tilt)]},
+        "contact": {"friction": mu},
+    })
+    sim = Simulation(case)
+    block = sim.model.bodies[0].points
+    m = sim.model.mass[block]
+    t, x = [], []
+    for _ in range(sim.n_steps):
+        sim.step()
+        t.append(sim.state.time)
+        x.append(np.sum(m * sim.state.x[block, 0]) / m.sum())
+    t, x = np.array(t), np.array(x)
+    late = t > 0.15
+    a = 2.0 * np.polyfit(t[late], x[late], 2)[0]
+    if expected > 0:
+        assert a == pytest.approx(expected, rel=0.03)
+    else:
+        assert abs(a) < 0.01 * g

@@ -47,13 +47,14 @@ class ContactState:
 
 
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
-                  wall_velocity: dict, friction: float, tolerance: float,
+                  wall_velocity: dict, wall_shape: dict, friction: float, tolerance: float,
                   max_iterations: int, step: int) -> tuple[ContactState, ContactDiagnostics]:
     """Run the coupled loop; ``steps`` maps deformable body index → BodyStep (not finished).
 
-    ``wall_velocity`` maps kinematic body index → its prescribed velocity.
+    ``wall_velocity`` and ``wall_shape`` map a kinematic body's index to its prescribed
+    velocity and its current shape (exact face normals against walls).
     """
-    contacts = find_contact_nodes(lattice, fields)
+    contacts = find_contact_nodes(lattice, fields, wall_shape)
     n = len(contacts)
     d = lattice.dim
     P = np.zeros((n, d))
@@ -83,8 +84,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
     P_new = np.empty(d)
     for k in range(1, max_iterations + 1):
         bulk_done = True
+        # a body's residual need not be finer than the impulses it carries (same units)
+        p_scale = tolerance * float(np.abs(P).max()) if n else 0.0
         for s in steps.values():
-            if not s.converged(limit=False):
+            if not s.converged(limit=False, floor=p_scale * s.impulse_weight):
                 bulk_done = False
                 s.newton_update()
         change = 0.0
@@ -112,8 +115,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
             s.refresh()
         diag.iterations = k
         diag.residual = change / max(float(np.abs(P).max()), floor)
-        if change <= tolerance * float(np.abs(P).max()) + floor and bulk_done and all(
-                s.converged(limit=False) for s in steps.values()):
+        p_scale = tolerance * float(np.abs(P).max())
+        if change <= p_scale + floor and bulk_done and all(
+                s.converged(limit=False, floor=p_scale * s.impulse_weight)
+                for s in steps.values()):
             break
     else:
         raise SimulationError(

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from softgrains.geometry import Disk, Rectangle
 from softgrains.grid.lattice import Lattice, NodeBox
 from softgrains.grid.stencils import BodyStencils
 
@@ -84,8 +85,44 @@ def global_node_index(lattice: Lattice, box: NodeBox) -> np.ndarray:
     return index
 
 
-def find_contact_nodes(lattice: Lattice, fields: list[NodalField]) -> ContactNodes:
-    """All (node, α, β) with both bodies' mass above their thresholds, and their normals."""
+def node_position(lattice: Lattice, index: np.ndarray) -> np.ndarray:
+    """Positions (n, d) of lattice nodes given by their global index."""
+    pos = np.empty((index.size, lattice.dim))
+    rem = index.copy()
+    for j in range(lattice.dim):
+        pos[:, j] = lattice.node_origin[j] + lattice.h * (rem % lattice.n_nodes[j])
+        rem //= lattice.n_nodes[j]
+    return pos
+
+
+def wall_face_normal(shape, x: np.ndarray) -> np.ndarray | None:
+    """Outward unit normal of a rigid wall's shape at the face nearest to each point x.
+
+    Rectangle: the nearest face's normal; disk: radial. Other shapes: None (the caller keeps
+    the mass-gradient normal).
+    """
+    if isinstance(shape, Rectangle):
+        lo, hi = np.asarray(shape.lower, float), np.asarray(shape.upper, float)
+        d = x.shape[1]
+        dist = np.concatenate([np.abs(x - lo), np.abs(x - hi)], axis=1)  # (n, 2d)
+        face = np.argmin(dist, axis=1)
+        normal = np.zeros_like(x)
+        normal[np.arange(len(x)), face % d] = np.where(face < d, -1.0, 1.0)
+        return normal
+    if isinstance(shape, Disk):
+        r = x - np.asarray(shape.center, float)
+        return r / np.maximum(np.linalg.norm(r, axis=1, keepdims=True), 1e-300)
+    return None
+
+
+def find_contact_nodes(lattice: Lattice, fields: list[NodalField],
+                       walls: dict | None = None) -> ContactNodes:
+    """All (node, α, β) with both bodies' mass above their thresholds, and their normals.
+
+    ``walls`` maps the body index of a rigid (kinematic) body to its Shape: against a wall the
+    wall is made β and the normal is its exact face normal (pointing out of the wall into α,
+    ALGORITHM.md §4), not the mass-gradient estimate.
+    """
     ids, bodies, locals_ = [], [], []
     for k, f in enumerate(fields):
         heavy = np.flatnonzero(f.mass > f.threshold)
@@ -120,6 +157,16 @@ def find_contact_nodes(lattice: Lattice, fields: list[NodalField]) -> ContactNod
     keep = length > 1e-12 * scale
     a, b, ka, kb = a[keep], b[keep], ka[keep], kb[keep]
     normal = diff[keep] / length[keep, None]
-    return ContactNodes(ids[a], np.array([fields[k].body for k in ka], dtype=np.int64),
-                        np.array([fields[k].body for k in kb], dtype=np.int64), normal,
-                        locals_[a], locals_[b])
+    alpha = np.array([fields[k].body for k in ka], dtype=np.int64)
+    beta = np.array([fields[k].body for k in kb], dtype=np.int64)
+    local_a, local_b = locals_[a], locals_[b]
+    for wall, shape in (walls or {}).items():
+        swap = alpha == wall  # make the wall β
+        alpha[swap], beta[swap] = beta[swap], wall
+        local_a[swap], local_b[swap] = local_b[swap], local_a[swap].copy()
+        normal[swap] *= -1.0
+        at_wall = beta == wall
+        exact = wall_face_normal(shape, node_position(lattice, ids[a][at_wall]))
+        if exact is not None:
+            normal[at_wall] = exact
+    return ContactNodes(ids[a], alpha, beta, normal, local_a, local_b)

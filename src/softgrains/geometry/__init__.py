@@ -1,5 +1,5 @@
 """Body shapes and material-point seeding (ALGORITHM.md §1)."""
 
-from softgrains.geometry.shapes import Disk, Polygon, Rectangle, Shape, seed_points
+from softgrains.geometry.shapes import Disk, Polygon, Rectangle, Shape, seed_points, translated
 
-__all__ = ["Disk", "Polygon", "Rectangle", "Shape", "seed_points"]
+__all__ = ["Disk", "Polygon", "Rectangle", "Shape", "seed_points", "translated"]

@@ -107,6 +107,17 @@ class Polygon(Shape):
                          np.sum((v[:, 1] + w[:, 1]) * cross)]) / (6.0 * a)
 
 
+def translated(shape: Shape, offset: np.ndarray) -> Shape:
+    """The shape moved rigidly by offset (for kinematic bodies)."""
+    offset = np.asarray(offset, dtype=float)
+    if isinstance(shape, Disk):
+        return Disk(np.asarray(shape.center, dtype=float) + offset, shape.radius)
+    if isinstance(shape, Rectangle):
+        return Rectangle(np.asarray(shape.lower, dtype=float) + offset,
+                         np.asarray(shape.upper, dtype=float) + offset)
+    return Polygon(np.asarray(shape.vertices, dtype=float) + offset)
+
+
 def seed_points(shape: Shape, origin: np.ndarray, h: float, n_pc: int) -> tuple[np.ndarray, float]:
     """Points of ``shape`` on the sub-lattice of spacing h/n_pc; returns (x (n, d), volume)."""
     delta = h / n_pc

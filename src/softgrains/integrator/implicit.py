@@ -337,12 +337,17 @@ class BodyStep:
         self.pi = self.potential(self.u, w_int)
 
     # -- Newton ------------------------------------------------------------------------
-    def converged(self, limit: bool = True) -> bool:
+    @property
+    def impulse_weight(self) -> float:
+        """How an impulse enters the residual: P (θ-scheme) or P/(γΔt) (Newmark)."""
+        return 1.0 / (self.settings.gamma * self.dt) if self.newmark else 1.0
+
+    def converged(self, limit: bool = True, floor: float = 0.0) -> bool:
         """Record the current residual; True when it passes the stopping test.
 
         Raises SimulationError on a non-finite residual, an inverted point or (when
         ``limit``) more than newton_max_iterations iterations; the contact loop bounds the
-        iterations itself (limit=False).
+        iterations itself (limit=False) and may allow a coarser residual ``floor``.
         """
         res, st, name, step = self.result, self.settings, self.stepper.name, self.step
         if not np.isfinite(self.rnorm) or self.jmin <= 0.0:
@@ -352,7 +357,7 @@ class BodyStep:
                 f"{res.iterations}; try a smaller dt or a finer grid.",
                 step=step, body=name, residuals=res.residuals + [self.rnorm])
         res.residuals.append(self.rnorm)
-        if self.rnorm <= max(st.tolerance * self.r0, self.floor):
+        if self.rnorm <= max(st.tolerance * self.r0, self.floor, floor):
             return True
         if limit and res.iterations >= st.max_iterations:
             raise SimulationError(
