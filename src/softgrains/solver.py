@@ -86,7 +86,12 @@ class Solver:
                 model.lattice, steps, fields,
                 {b.index: state.body_velocity[b.index] for b in walls},
                 {b.index: translated(b.shape, state.body_offset[b.index]) for b in walls},
-                contact.friction, contact.tolerance, contact.max_iterations, state.step)
+                contact.friction, contact.tolerance, contact.max_iterations, state.step, dt,
+                gap_points={b.index: state.x[b.points] for b in model.bodies}
+                if contact.gap else None,
+                spacing=model.lattice.h / model.points_per_cell,
+                reach=model.lattice.h * (1.0 if model.shape_kind == 0 else 1.5) * np.sqrt(
+                    model.dim))
         else:
             for s in steps.values():
                 while not s.converged():

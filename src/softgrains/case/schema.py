@@ -256,6 +256,7 @@ class ContactSettings(_Section):
 
     enabled: bool = Field(True, description="contact between bodies on or off")
     friction: float = Field(0.0, ge=0.0, le=10.0, description="Coulomb coefficient (global)")
+    gap: bool = Field(True, description="act only when the boundaries meet (ALGORITHM.md §4)")
     tolerance: float = Field(1e-4, gt=0.0, lt=1.0, description="relative impulse change")
     max_iterations: int = Field(2000, ge=1, le=100000, description="Gauss-Seidel sweeps")
 

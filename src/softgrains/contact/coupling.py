@@ -10,7 +10,8 @@ local relation).
     until ‖P^k − P^{k−1}‖ ≤ tol ‖P^k‖ + floor and every body's residual has converged
 
 Kinematic bodies take no impulse response (1/m = 0): their nodal velocity is their
-prescribed velocity. The gap treatment of §4 is not in yet: contacts act on mass overlap.
+prescribed velocity. With the gap treatment (gap.py, on by default) a contact acts only when
+the bodies' boundaries would meet within the step.
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from softgrains.contact.detection import ContactNodes, NodalField, find_contact_nodes
+from softgrains.contact.gap import boundary_gaps
 from softgrains.contact.local_law import OPEN, SLIP, STICK, local_impulse
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
@@ -48,15 +50,20 @@ class ContactState:
 
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
                   wall_velocity: dict, wall_shape: dict, friction: float, tolerance: float,
-                  max_iterations: int, step: int) -> tuple[ContactState, ContactDiagnostics]:
+                  max_iterations: int, step: int, dt: float,
+                  gap_points: dict | None = None, spacing: float = 0.0,
+                  reach: float = 0.0) -> tuple[ContactState, ContactDiagnostics]:
     """Run the coupled loop; ``steps`` maps deformable body index → BodyStep (not finished).
 
     ``wall_velocity`` and ``wall_shape`` map a kinematic body's index to its prescribed
-    velocity and its current shape (exact face normals against walls).
+    velocity and its current shape (exact face normals against walls). With ``gap_points``
+    (body index → start-of-step point positions) the boundary gap of gap.py is used.
     """
     contacts = find_contact_nodes(lattice, fields, wall_shape)
     n = len(contacts)
     d = lattice.dim
+    gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach)
+            if gap_points is not None else np.zeros(n))
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)
     diag = ContactDiagnostics(n_contacts=n)
@@ -102,7 +109,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
                 continue
             w_free[:] = va - vb - inv_m * P[c]
             status[c] = local_impulse(w_free, contacts.normal[c], 1.0 / inv_m, 1.0 / inv_m,
-                                      0.0, friction, P_new)
+                                      gaps[c] / dt, friction, P_new)
             dP = P_new - P[c]
             if np.any(dP != 0.0):
                 if sa:
