@@ -22,6 +22,23 @@ def _two_disks(enabled=True, gap=True):
     })
 
 
+def _block_on_slab(h=0.1, young=1e5, dt=0.01, steps=60, gravity=(0.0, -10.0), contact=None,
+                   slab_length=1.6):
+    """An elastic 0.8 × 0.4 m block released 0.02 m above a kinematic slab (θ = 1)."""
+    return Simulation(load_case({
+        "simulation": {"dt": dt, "steps": steps, "theta": 1.0},
+        "grid": {"cell_size": h, "origin": [0.0, 0.0], "size": [slab_length + 0.4, 2.0]},
+        "materials": {"gel": {"young": young, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [
+            {"name": "block", "shape": "rectangle", "lower": [0.6, 0.62],
+             "upper": [1.4, 1.02], "material": "gel"},
+            {"name": "slab", "shape": "rectangle", "lower": [0.2, 0.3],
+             "upper": [0.2 + slab_length, 0.6], "material": "gel", "kind": "kinematic"}],
+        "gravity": {"acceleration": list(gravity)},
+        "contact": contact or {},
+    }))
+
+
 @pytest.mark.parametrize(("gap", "onset_range"), [(True, (1.4, 1.6)), (False, (1.0, 1.25))],
                          ids=["gap", "mass-overlap"])
 def test_two_disks_collide_with_exact_momentum_and_no_energy_gain(gap, onset_range):
@@ -59,18 +76,7 @@ def test_block_resting_on_a_wall_reports_a_constant_force_mg():
     """An elastic block released just above a kinematic slab under gravity (θ = 1): once
     settled, the slab pushes it with m g within 1% at every step (no chatter between 2mg
     and 0). Measured: 0.994–1.003 mg over steps 50–60."""
-    case = load_case({
-        "simulation": {"dt": 0.01, "steps": 60, "theta": 1.0},
-        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
-        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [
-            {"name": "block", "shape": "rectangle", "lower": [0.6, 0.62],
-             "upper": [1.4, 1.02], "material": "gel"},
-            {"name": "slab", "shape": "rectangle", "lower": [0.2, 0.3], "upper": [1.8, 0.6],
-             "material": "gel", "kind": "kinematic"}],
-        "gravity": {"acceleration": [0.0, -10.0]},
-    })
-    sim = Simulation(case)
+    sim = _block_on_slab()
     weight = 10.0 * sim.model.mass[sim.model.bodies[0].points].sum()
     ratios = []
     for _ in range(sim.n_steps):
@@ -89,19 +95,9 @@ def test_block_on_an_incline_slides_with_the_coulomb_acceleration(mu, expected):
     −0.002 m/s² (μ = 0.7: sticks). The exact face normal of the wall is what makes this
     right: mass-gradient normals gave 2.28 m/s² at μ = 0.2 and stuck at μ = 0.5."""
     g, tilt = 9.81, np.radians(30.0)
-    case = load_case({
-        "simulation": {"dt": 0.005, "steps": 80, "theta": 1.0},
-        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [4.0, 2.0]},
-        "materials": {"gel": {"young": 1e6, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [
-            {"name": "block", "shape": "rectangle", "lower": [0.6, 0.62],
-             "upper": [1.4, 1.02], "material": "gel"},
-            {"name": "slab", "shape": "rectangle", "lower": [0.2, 0.3], "upper": [3.8, 0.6],
-             "material": "gel", "kind": "kinematic"}],
-        "gravity": {"acceleration": [g * np.sin(tilt), -g * np.cos(tilt)]},
-        "contact": {"friction": mu},
-    })
-    sim = Simulation(case)
+    sim = _block_on_slab(young=1e6, dt=0.005, steps=80, slab_length=3.6,
+                         gravity=(g * np.sin(tilt), -g * np.cos(tilt)),
+                         contact={"friction": mu})
     block = sim.model.bodies[0].points
     m = sim.model.mass[block]
     t, x = [], []
@@ -125,17 +121,7 @@ def test_resting_block_boundary_gap(gap):
     overlap alone it stops about half a cell above. Measured (2026-11-23): −0.010 h with the
     gap, +0.45 h without."""
     h = 0.05
-    sim = Simulation(load_case({
-        "simulation": {"dt": 0.01, "steps": 60, "theta": 1.0},
-        "grid": {"cell_size": h, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
-        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [
-            {"name": "block", "shape": "rectangle", "lower": [0.6, 0.62],
-             "upper": [1.4, 1.02], "material": "gel"},
-            {"name": "slab", "shape": "rectangle", "lower": [0.2, 0.3], "upper": [1.8, 0.6],
-             "material": "gel", "kind": "kinematic"}],
-        "gravity": {"acceleration": [0.0, -10.0]},
-        "contact": {"gap": gap}}))
+    sim = _block_on_slab(h=h, contact={"gap": gap})
     for _ in range(sim.n_steps):
         sim.step()
     bottom = sim.state.x[sim.model.bodies[0].points, 1].min() - 0.25 * h

@@ -48,6 +48,17 @@ def test_rigid_rotation_is_stress_free(small_body, kind):
     assert np.allclose(vol, v0, rtol=1e-12)
 
 
+def _moving_block(xs):
+    """Points at xs (spacing 0.05) of a neo-Hookean block moving at 1 m/s along x."""
+    n, vol = len(xs), np.full(len(xs), 0.05**2)
+    lam, mu = lame_parameters(1.0e6, 0.3)
+    return implicit.BodyPoints(
+        x=xs.copy(), v=np.tile([1.0, 0.0], (n, 1)), a=np.zeros((n, 2)),
+        F=np.tile(np.eye(2), (n, 1, 1)), sigma=np.zeros((n, 3, 3)), vol=vol.copy(),
+        mass=1000 * vol, vol0=vol.copy(), law=np.zeros(n, dtype=np.int64),
+        lam=np.full(n, lam), mu=np.full(n, mu))
+
+
 def test_points_next_to_a_removed_node_stay_strain_free_in_rigid_motion():
     """A node lighter than the activity threshold is removed from the stencils; the weights
     are renormalised and its gradient moved to the active nodes, so a rigid translation of a
@@ -56,13 +67,7 @@ def test_points_next_to_a_removed_node_stay_strain_free_in_rigid_motion():
     h = 0.1
     xs = np.array([[0.325 + 0.05 * i, 0.325 + 0.05 * j] for i in range(4) for j in range(4)])
     xs[xs[:, 0] > 0.45, 0] = 0.5 + 1e-6 * h
-    n, vol = len(xs), np.full(len(xs), 0.05**2)
-    lam, mu = lame_parameters(1.0e6, 0.3)
-    pts = implicit.BodyPoints(
-        x=xs.copy(), v=np.tile([1.0, 0.0], (n, 1)), a=np.zeros((n, 2)),
-        F=np.tile(np.eye(2), (n, 1, 1)), sigma=np.zeros((n, 3, 3)), vol=vol.copy(),
-        mass=1000 * vol, vol0=vol.copy(), law=np.zeros(n, dtype=np.int64),
-        lam=np.full(n, lam), mu=np.full(n, mu))
+    pts = _moving_block(xs)
     stepper = implicit.BodyStepper("block", Lattice.covering([0, 0], [1, 1], h), 0,
                                    implicit.IntegratorSettings(), [])
     stepper.step(pts, np.zeros(2), 1e-3, 0)
@@ -74,13 +79,7 @@ def test_fixed_nodes_pass_their_velocity_to_the_points_with_flip():
     """All nodes clamped at rest: after a FLIP step the points are at rest too (the FLIP
     increment starts from the unconstrained nodal velocity)."""
     xs = np.array([[0.325 + 0.05 * i, 0.325 + 0.05 * j] for i in range(4) for j in range(4)])
-    n, vol = len(xs), np.full(len(xs), 0.05**2)
-    lam, mu = lame_parameters(1.0e6, 0.3)
-    pts = implicit.BodyPoints(
-        x=xs.copy(), v=np.tile([1.0, 0.0], (n, 1)), a=np.zeros((n, 2)),
-        F=np.tile(np.eye(2), (n, 1, 1)), sigma=np.zeros((n, 3, 3)), vol=vol.copy(),
-        mass=1000 * vol, vol0=vol.copy(), law=np.zeros(n, dtype=np.int64),
-        lam=np.full(n, lam), mu=np.full(n, mu))
+    pts = _moving_block(xs)
     clamp = implicit.DirichletBox(np.array([-1.0, -1.0]), np.array([2.0, 2.0]),
                                   np.array([True, True]), np.zeros(2))
     stepper = implicit.BodyStepper("block", Lattice.covering([0, 0], [1, 1], 0.1), 0,
