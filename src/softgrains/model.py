@@ -8,6 +8,7 @@ parameters) sit in the Model; positions, velocities, accelerations, F, σ and V 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -58,6 +59,12 @@ class Model:
     @property
     def n_points(self) -> int:
         return self.mass.size
+
+    @cached_property
+    def deformable_points(self) -> np.ndarray:
+        """Indices of the points of deformable bodies (kinematic walls are driven)."""
+        return np.concatenate([np.arange(b.points.start, b.points.stop)
+                               for b in self.bodies if b.deformable] or [np.arange(0)])
 
 
 @dataclass

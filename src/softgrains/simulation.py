@@ -59,8 +59,7 @@ class Simulation:
     # -- observables -------------------------------------------------------------------
     def series_row(self, wall_time: float = 0.0) -> dict[str, object]:
         m, s, dg = self.model, self.state, self.last_diagnostics
-        deformable = np.concatenate([np.arange(b.points.start, b.points.stop)
-                                     for b in m.bodies if b.deformable] or [np.arange(0)])
+        deformable = m.deformable_points
         # energies and momentum of the deformable bodies (kinematic walls are driven)
         ek = kinetic_energy(m.mass[deformable], s.v[deformable])
         es = strain_energy(m.law[deformable], s.F[deformable], m.lam[deformable],

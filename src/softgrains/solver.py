@@ -1,8 +1,9 @@
-"""One time step of the whole model (ALGORITHM.md §3, §7): every body independently.
+"""One time step of the whole model (ALGORITHM.md §3–7).
 
-Deformable bodies take an implicit Newton step each (bodies do not interact yet: the contact
-issue adds the Gauss–Seidel coupling of §6); kinematic bodies move rigidly at their
-prescribed velocity. The solver never prints and never writes files.
+Deformable bodies take an implicit Newton step each, coupled through contact by the
+Gauss–Seidel loop of §6 (contact/coupling.py) when [contact] is enabled and there are two
+bodies or more; kinematic bodies move rigidly at their prescribed velocity. The solver never
+prints and never writes files.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from threadpoolctl import threadpool_limits
 from softgrains.contact.coupling import ContactDiagnostics, ContactState, solve_coupled
 from softgrains.contact.detection import nodal_field
 from softgrains.geometry import translated
+from softgrains.grid.shape_functions import stencil_width
 from softgrains.grid.stencils import BodyStencils, body_stencils
 from softgrains.integrator.implicit import BodyPoints, BodyStep, BodyStepper, BodyStepResult
 from softgrains.model import Model, State
@@ -90,12 +92,11 @@ class Solver:
                 gap_points={b.index: state.x[b.points] for b in model.bodies}
                 if contact.gap else None,
                 spacing=model.lattice.h / model.points_per_cell,
-                reach=model.lattice.h * (1.0 if model.shape_kind == 0 else 1.5) * np.sqrt(
-                    model.dim))
+                reach=0.5 * stencil_width(model.shape_kind) * model.lattice.h
+                * np.sqrt(model.dim))
         else:
             for s in steps.values():
-                while not s.converged():
-                    s.newton_update()
+                s.solve()
         for body in model.bodies:
             if body.deformable:
                 res = steps[body.index].finish()

@@ -69,8 +69,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
     diag = ContactDiagnostics(n_contacts=n)
     if n == 0:
         for s in steps.values():
-            while not s.converged():
-                s.newton_update()
+            s.solve()
         return ContactState(contacts, P, status), diag
 
     def side(body, local):
@@ -89,14 +88,11 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
     floor = IMPULSE_FLOOR * max(scale, 1e-300)
     w_free = np.empty(d)
     P_new = np.empty(d)
+    done = {i: b.converged(limit=False) for i, b in steps.items()}
     for k in range(1, max_iterations + 1):
-        bulk_done = True
-        # a body's residual need not be finer than the impulses it carries (same units)
-        p_scale = tolerance * float(np.abs(P).max()) if n else 0.0
-        for s in steps.values():
-            if not s.converged(limit=False, floor=p_scale * s.impulse_weight):
-                bulk_done = False
-                s.newton_update()
+        for i, b in steps.items():
+            if not done[i]:
+                b.newton_update()
         change = 0.0
         for c in range(n):
             (sa, ra), (sb, rb) = sides[c]
@@ -122,10 +118,11 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
             s.refresh()
         diag.iterations = k
         diag.residual = change / max(float(np.abs(P).max()), floor)
+        # a body's residual need not be finer than the impulses it carries (same units)
         p_scale = tolerance * float(np.abs(P).max())
-        if change <= p_scale + floor and bulk_done and all(
-                s.converged(limit=False, floor=p_scale * s.impulse_weight)
-                for s in steps.values()):
+        done = {i: b.converged(limit=False, floor=p_scale * b.impulse_weight)
+                for i, b in steps.items()}
+        if change <= p_scale + floor and all(done.values()):
             break
     else:
         raise SimulationError(

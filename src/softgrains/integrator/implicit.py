@@ -179,8 +179,7 @@ class BodyStepper:
     def step(self, pts: BodyPoints, gravity: np.ndarray, dt: float, step: int) -> BodyStepResult:
         """One implicit step of the body (points updated in place)."""
         body_step = BodyStep(self, pts, gravity, dt, step)
-        while not body_step.converged():
-            body_step.newton_update()
+        body_step.solve()
         return body_step.finish()
 
 
@@ -366,6 +365,11 @@ class BodyStep:
                 f"{self.r0:.3e}); try a smaller dt, more newton_max_iterations or a looser "
                 "newton_tolerance.", step=step, body=name, residuals=res.residuals)
         return False
+
+    def solve(self) -> None:
+        """Newton iterations without contact, until converged (or a SimulationError)."""
+        while not self.converged():
+            self.newton_update()
 
     def newton_update(self) -> None:
         """One Newton iteration: tangent, linear solve, line search."""
