@@ -55,6 +55,7 @@ class Model:
     integrator: IntegratorSettings
     constraints: dict[int, list[DirichletBox]] = field(default_factory=dict)
     contact: object = None  # the case's [contact] settings
+    friction: np.ndarray | None = None  # (B, B) Coulomb coefficient per body pair
 
     @property
     def n_points(self) -> int:
@@ -79,6 +80,7 @@ class State:
     vol: np.ndarray
     body_velocity: np.ndarray  # (B, d): prescribed velocity of kinematic bodies
     body_offset: np.ndarray  # (B, d): rigid displacement of kinematic bodies since the start
+    contacts: object = None  # the last step's ContactState (warm start of the next step)
 
 
 def make_shape(body) -> Shape:
@@ -148,7 +150,8 @@ def build(case) -> tuple[Model, State]:
         points_per_cell=grid.points_per_cell, bodies=bodies, mass=np.concatenate(masses),
         vol0=np.concatenate(vols), body_id=np.concatenate(ids), law=np.concatenate(laws),
         lam=np.concatenate(lams), mu=np.concatenate(mus), gravity=gravity, integrator=settings,
-        constraints=_constraints(case, bodies, dim), contact=case.contact)
+        constraints=_constraints(case, bodies, dim), contact=case.contact,
+        friction=friction_matrix(case.contact, bodies))
     state = State(
         time=0.0, step=0, x=x, v=np.concatenate(vs), a=np.zeros((n, dim)),
         F=np.tile(np.eye(dim), (n, 1, 1)), sigma=np.zeros((n, 3, 3)),
@@ -174,3 +177,23 @@ def _constraints(case, bodies: list[BodySpec], dim: int) -> dict[int, list[Diric
             if t in out:
                 out[t].append(box)
     return out
+
+
+def friction_matrix(contact, bodies: list[BodySpec]) -> np.ndarray:
+    """μ per body pair: ``friction`` between grains, ``wall_friction`` (default: friction)
+    between a grain and a kinematic body, and ``[[contact.pairs]]`` for named pairs."""
+    n = len(bodies)
+    mu = np.full((n, n), contact.friction)
+    wall = np.array([not b.deformable for b in bodies])
+    if contact.wall_friction is not None:
+        mu[wall, :] = contact.wall_friction
+        mu[:, wall] = contact.wall_friction
+    by_name = {b.name: b.index for b in bodies}
+    for i, pair in enumerate(contact.pairs):
+        unknown = [nm for nm in pair.bodies if nm not in by_name]
+        if unknown:
+            raise CaseError(f"[contact.pairs.{i}].bodies = {pair.bodies}: no body named "
+                            f"{unknown}; known bodies: {sorted(by_name)[:10]}")
+        a, b = (by_name[nm] for nm in pair.bodies)
+        mu[a, b] = mu[b, a] = pair.friction
+    return mu

@@ -13,7 +13,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from softgrains.contact.coupling import ContactDiagnostics, ContactState, solve_coupled
+from softgrains.contact.coupling import (
+    ContactDiagnostics,
+    ContactState,
+    CouplingSettings,
+    solve_coupled,
+)
 from softgrains.contact.detection import nodal_field
 from softgrains.geometry import translated
 from softgrains.grid.shape_functions import stencil_width
@@ -58,6 +63,10 @@ class Solver:
                                  model.constraints.get(b.index, []))
             for b in model.bodies if b.deformable
         }
+        c = model.contact
+        self.coupling = CouplingSettings(
+            relation=c.local_relation, tolerance=c.tolerance, max_iterations=c.max_iterations,
+            gap=c.gap, on_failure=c.on_failure) if c is not None else CouplingSettings()
 
     def body_points(self, state: State, index: int) -> BodyPoints:
         m, sl = self.model, self.model.bodies[index].points
@@ -83,17 +92,18 @@ class Solver:
                     stencils = body_stencils(model.lattice, model.shape_kind,
                                              state.x[b.points], b.name, state.step)
                 fields.append(nodal_field(b.index, stencils, model.mass[b.points]))
-            walls = [b for b in model.bodies if not b.deformable]
+            walls = {b.index: (state.body_velocity[b.index],
+                               translated(b.shape, state.body_offset[b.index]))
+                     for b in model.bodies if not b.deformable}
             diag.contacts, diag.contact = solve_coupled(
-                model.lattice, steps, fields,
-                {b.index: state.body_velocity[b.index] for b in walls},
-                {b.index: translated(b.shape, state.body_offset[b.index]) for b in walls},
-                contact.friction, contact.tolerance, contact.max_iterations, state.step, dt,
+                model.lattice, steps, fields, walls, self.coupling,
+                lambda a, b: model.friction[a, b], state.step, dt,
                 gap_points={b.index: state.x[b.points] for b in model.bodies}
                 if contact.gap else None,
                 spacing=model.lattice.h / model.points_per_cell,
                 reach=0.5 * stencil_width(model.shape_kind) * model.lattice.h
-                * np.sqrt(model.dim))
+                * np.sqrt(model.dim), warm=state.contacts)
+            state.contacts = diag.contacts
         else:
             for s in steps.values():
                 s.solve()

@@ -251,14 +251,33 @@ class Gravity(_Section):
     acceleration: list[float] = Field(default_factory=_zero_vector, description="[m/s^2]")
 
 
+class FrictionPair(_Section):
+    """``[[contact.pairs]]``: the Coulomb coefficient between two named bodies."""
+
+    bodies: list[str] = Field(min_length=2, max_length=2, description="two body names")
+    friction: float = Field(ge=0.0, le=10.0, description="Coulomb coefficient")
+
+
 class ContactSettings(_Section):
     """``[contact]``: frictional contact between bodies (Contact Dynamics)."""
 
     enabled: bool = Field(True, description="contact between bodies on or off")
     friction: float = Field(0.0, ge=0.0, le=10.0, description="Coulomb coefficient (global)")
+    wall_friction: float | None = Field(
+        None, ge=0.0, le=10.0, description="between a grain and a kinematic body (default: "
+        "friction)")
+    pairs: list[FrictionPair] = Field(default_factory=list,
+                                      description="friction of named body pairs")
     gap: bool = Field(True, description="act only when the boundaries meet (ALGORITHM.md §4)")
+    local_relation: Literal["delassus", "lumped"] = Field(
+        "delassus", description="local compliance: Delassus (bodies' Newton matrices) or "
+        "lumped nodal masses")
     tolerance: float = Field(1e-4, gt=0.0, lt=1.0, description="relative impulse change")
-    max_iterations: int = Field(2000, ge=1, le=100000, description="Gauss-Seidel sweeps")
+    max_iterations: int = Field(2000, ge=1, le=100000,
+                                description="coupling iterations (Newton + Gauss-Seidel)")
+    on_failure: Literal["stop", "warn"] = Field(
+        "stop", description="when the loop does not converge: stop the run, or warn, flag "
+        "the step in series.csv and go on")
 
 
 class OutputSettings(_Section):

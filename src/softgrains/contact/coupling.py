@@ -1,42 +1,63 @@
-"""Contact and bulk together: the nonlinear Gauss–Seidel loop of ALGORITHM.md §6 (lumped
-local relation).
+"""Contact and bulk together: the nonlinear Gauss–Seidel loop of ALGORITHM.md §6.
 
-    set up every deformable body's step; find the contact nodes and normals
-    repeat:
+    set up every deformable body's step; find the contact nodes, normals and gaps;
+    warm start: the impulses of the previous step at the same (node, α, β) enter b
+    repeat (outer iteration k):
         one Newton update of every body not yet converged (with the current impulses)
-        Gauss–Seidel over the contacts: w^free = w − (1/m^α + 1/m^β) P with the latest
-            end-of-step velocities, local Signorini–Coulomb solution (local_law.py),
-            the impulse change moves both bodies' velocities by ±ΔP/m at the node
-    until ‖P^k − P^{k−1}‖ ≤ tol ‖P^k‖ + floor and every body's residual has converged
+        each body in contact: its local compliance W at its contact rows
+            lumped: diag(1/m);  Delassus: κ w [A⁻¹]_cc from the LU of its Newton matrix
+        Gauss–Seidel sweeps over the contacts with W (gauss_seidel.py) until the impulses
+            settle; the summed impulse changes Q move each body's iterate by X Q
+            (X = w A⁻¹ E, Delassus) or by w Q/(c_m m) at the rows (lumped)
+    until ‖P^k − P^{k−1}‖∞ ≤ tol ‖P^k‖∞ + floor and every body's residual has converged
 
-Kinematic bodies take no impulse response (1/m = 0): their nodal velocity is their
-prescribed velocity. With the gap treatment (gap.py, on by default) a contact acts only when
-the bodies' boundaries would meet within the step.
+Kinematic bodies take no impulse response (W = 0): their nodal velocity is their prescribed
+velocity. With the gap treatment (gap.py, on by default) a contact acts only when the
+bodies' boundaries would meet within the step.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from softgrains.contact.detection import ContactNodes, NodalField, find_contact_nodes
 from softgrains.contact.gap import boundary_gaps
-from softgrains.contact.local_law import OPEN, SLIP, STICK, local_impulse
+from softgrains.contact.gauss_seidel import gauss_seidel
+from softgrains.contact.local_law import SLIP, STICK
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
 
 IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
+MAX_SWEEPS_PER_ITERATION = 200  # Gauss–Seidel sweeps between two Newton updates
+
+
+@dataclass(frozen=True)
+class CouplingSettings:
+    """How the loop runs: local relation, tolerance, iteration limit, gap treatment and
+    what to do when the limit is reached (``stop``: SimulationError; ``warn``: go on and
+    flag the step)."""
+
+    relation: str = "delassus"
+    tolerance: float = 1e-4
+    max_iterations: int = 2000
+    gap: bool = True
+    on_failure: str = "stop"
 
 
 @dataclass
 class ContactDiagnostics:
-    iterations: int = 0
+    iterations: int = 0  # outer iterations (Newton updates interleaved with sweeps)
+    sweeps: int = 0  # Gauss–Seidel sweeps in all
     residual: float = 0.0
     n_contacts: int = 0
     active: int = 0
     sticking: int = 0
     sliding: int = 0
+    converged: bool = True
+    message: str = ""
 
 
 @dataclass
@@ -46,90 +67,176 @@ class ContactState:
     nodes: ContactNodes
     impulse: np.ndarray  # (n_contacts, d)
     status: np.ndarray  # OPEN / STICK / SLIP
+    gap: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def keys(self) -> list[tuple[int, int, int]]:
+        n = self.nodes
+        return list(zip(n.node.tolist(), n.alpha.tolist(), n.beta.tolist(), strict=True))
 
 
-def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField],
-                  wall_velocity: dict, wall_shape: dict, friction: float, tolerance: float,
-                  max_iterations: int, step: int, dt: float,
-                  gap_points: dict | None = None, spacing: float = 0.0,
-                  reach: float = 0.0) -> tuple[ContactState, ContactDiagnostics]:
+def _subset(contacts: ContactNodes, keep: np.ndarray) -> ContactNodes:
+    return ContactNodes(contacts.node[keep], contacts.alpha[keep], contacts.beta[keep],
+                        contacts.normal[keep], contacts.local_alpha[keep],
+                        contacts.local_beta[keep])
+
+
+class _Slots:
+    """The deformable bodies in contact, their distinct contact rows and compliances."""
+
+    def __init__(self, steps: dict, contacts: ContactNodes) -> None:
+        n = len(contacts)
+        self.bodies: list[int] = []
+        self.rows: list[np.ndarray] = []
+        self.a_slot = -np.ones(n, np.int64)
+        self.a_col = np.zeros(n, np.int64)
+        self.b_slot = -np.ones(n, np.int64)
+        self.b_col = np.zeros(n, np.int64)
+        sides = ((contacts.alpha, contacts.local_alpha, self.a_slot, self.a_col),
+                 (contacts.beta, contacts.local_beta, self.b_slot, self.b_col))
+        body_ids = sorted({int(b) for b in np.r_[contacts.alpha, contacts.beta]
+                           if int(b) in steps})
+        for slot, body in enumerate(body_ids):
+            row_of = steps[body].active_row
+            mine = [(which, c) for which, (bodies, *_rest) in enumerate(sides)
+                    for c in np.flatnonzero(bodies == body)]
+            rows = np.unique([row_of[sides[w][1][c]] for w, c in mine])
+            for w, c in mine:
+                _, local, slots, cols = sides[w]
+                slots[c] = slot
+                cols[c] = np.searchsorted(rows, row_of[local[c]])
+            self.bodies.append(body)
+            self.rows.append(rows)
+        self.k_size = np.array([r.size for r in self.rows], np.int64)
+        self.k_off = np.r_[0, np.cumsum(self.k_size)][:-1].astype(np.int64)
+        self.response: list[np.ndarray | None] = [None] * len(body_ids)
+        self.W: list[np.ndarray | None] = [None] * len(body_ids)
+
+
+def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls: dict,
+                  settings: CouplingSettings, friction: Callable, step: int, dt: float,
+                  gap_points: dict | None = None, spacing: float = 0.0, reach: float = 0.0,
+                  warm: ContactState | None = None) -> tuple[ContactState, ContactDiagnostics]:
     """Run the coupled loop; ``steps`` maps deformable body index → BodyStep (not finished).
 
-    ``wall_velocity`` and ``wall_shape`` map a kinematic body's index to its prescribed
-    velocity and its current shape (exact face normals against walls). With ``gap_points``
-    (body index → start-of-step point positions) the boundary gap of gap.py is used.
+    ``walls`` maps a kinematic body's index to (prescribed velocity, current shape): exact
+    face normals against walls. ``friction(alpha, beta)`` gives μ per contact. With
+    ``gap_points`` (body index → start-of-step point positions) the boundary gap of gap.py
+    is used. ``warm``: the previous step's contacts (warm start).
     """
-    contacts = find_contact_nodes(lattice, fields, wall_shape)
-    n = len(contacts)
-    d = lattice.dim
-    gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach)
-            if gap_points is not None else np.zeros(n))
+    contacts = find_contact_nodes(lattice, fields, {b: s for b, (_, s) in walls.items()})
+    # a node below a body's activity threshold carries no unknown there: no contact
+    usable = np.ones(len(contacts), bool)
+    for bodies, local in ((contacts.alpha, contacts.local_alpha),
+                          (contacts.beta, contacts.local_beta)):
+        for c in range(len(contacts)):
+            s = steps.get(int(bodies[c]))
+            if s is not None and s.active_row[local[c]] < 0:
+                usable[c] = False
+    contacts = _subset(contacts, usable)
+    n, d = len(contacts), lattice.dim
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)
     diag = ContactDiagnostics(n_contacts=n)
     if n == 0:
         for s in steps.values():
             s.solve()
-        return ContactState(contacts, P, status), diag
+        return ContactState(contacts, P, status, np.zeros(0)), diag
+    gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach)
+            if gap_points is not None else np.zeros(n))
+    mu = np.asarray(friction(contacts.alpha, contacts.beta), float)
+    slots = _Slots(steps, contacts)
+    wall_va = np.zeros((n, d))
+    wall_vb = np.zeros((n, d))
+    for c in range(n):
+        if slots.a_slot[c] < 0:
+            wall_va[c] = walls[int(contacts.alpha[c])][0]
+        if slots.b_slot[c] < 0:
+            wall_vb[c] = walls[int(contacts.beta[c])][0]
+    k_total = int(slots.k_size.sum())
+    V = np.zeros((k_total, d))
+    Q = np.zeros((k_total, d))
 
-    def side(body, local):
-        s = steps.get(body)
-        if s is None:
-            return None, -1
-        return s, int(s.active_row[local])
-
-    sides = [(side(a, la), side(b, lb)) for a, b, la, lb in zip(
-        contacts.alpha, contacts.beta, contacts.local_alpha, contacts.local_beta, strict=True)]
     scale = 0.0
-    for (sa, ra), (sb, rb) in sides:
-        for s, r in ((sa, ra), (sb, rb)):
-            if s is not None and r >= 0:
-                scale = max(scale, float(s.m[r, 0] * np.abs(s.node_velocity(np.array([r]))).max()))
+    for slot, body in enumerate(slots.bodies):
+        s, rows = steps[body], slots.rows[slot]
+        scale = max(scale, float((s.m[rows, 0, None] * np.abs(s.node_velocity(rows))).max()))
     floor = IMPULSE_FLOOR * max(scale, 1e-300)
-    w_free = np.empty(d)
-    P_new = np.empty(d)
+
+    if warm is not None and len(warm.nodes):
+        previous = dict(zip(warm.keys(), warm.impulse, strict=True))
+        for c, key in enumerate(ContactState(contacts, P, status).keys()):
+            if key in previous:
+                P[c] = previous[key]
+        _pass_on(steps, slots, _row_sums(slots, P), move=False)
+
+    delassus = settings.relation == "delassus"
     done = {i: b.converged(limit=False) for i, b in steps.items()}
-    for k in range(1, max_iterations + 1):
+    P_before = P.copy()
+    for k in range(1, settings.max_iterations + 1):
+        updated = set()
         for i, b in steps.items():
             if not done[i]:
                 b.newton_update()
-        change = 0.0
-        for c in range(n):
-            (sa, ra), (sb, rb) = sides[c]
-            if (sa is not None and ra < 0) or (sb is not None and rb < 0):
-                continue  # the node carries no unknown in one body
-            va = sa.node_velocity(np.array([ra]))[0] if sa else wall_velocity[contacts.alpha[c]]
-            vb = sb.node_velocity(np.array([rb]))[0] if sb else wall_velocity[contacts.beta[c]]
-            inv_m = (1.0 / sa.m[ra, 0] if sa else 0.0) + (1.0 / sb.m[rb, 0] if sb else 0.0)
-            if inv_m == 0.0:
-                continue
-            w_free[:] = va - vb - inv_m * P[c]
-            status[c] = local_impulse(w_free, contacts.normal[c], 1.0 / inv_m, 1.0 / inv_m,
-                                      gaps[c] / dt, friction, P_new)
-            dP = P_new - P[c]
-            if np.any(dP != 0.0):
-                if sa:
-                    sa.apply_impulse(ra, dP)
-                if sb:
-                    sb.apply_impulse(rb, -dP)
-                P[c] = P_new
-                change = max(change, float(np.abs(dP).max()))
-        for s in steps.values():
-            s.refresh()
+                updated.add(i)
+        for slot, body in enumerate(slots.bodies):
+            if slots.W[slot] is None or (delassus and body in updated):
+                slots.response[slot], slots.W[slot] = steps[body].contact_response(
+                    slots.rows[slot], delassus)
+            V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = \
+                steps[body].node_velocity(slots.rows[slot])
+        W = np.concatenate([w.ravel() for w in slots.W])
+        w_off = np.r_[0, np.cumsum([w.size for w in slots.W])][:-1].astype(np.int64)
+        Q[:] = 0.0
+        sweeps, _ = gauss_seidel(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
+                                 wall_va, wall_vb, contacts.normal, gaps / dt, mu,
+                                 slots.k_off, w_off, slots.k_size, W, V, Q, P, status,
+                                 settings.tolerance, floor, MAX_SWEEPS_PER_ITERATION)
+        diag.sweeps += sweeps
+        _pass_on(steps, slots, Q, move=True)
+        change = float(np.abs(P - P_before).max())
+        P_before[:] = P
         diag.iterations = k
-        diag.residual = change / max(float(np.abs(P).max()), floor)
+        largest = float(np.abs(P).max())
+        diag.residual = change / max(largest, floor)
         # a body's residual need not be finer than the impulses it carries (same units)
-        p_scale = tolerance * float(np.abs(P).max())
+        p_scale = settings.tolerance * largest
         done = {i: b.converged(limit=False, floor=p_scale * b.impulse_weight)
                 for i, b in steps.items()}
         if change <= p_scale + floor and all(done.values()):
             break
     else:
-        raise SimulationError(
-            f"step {step}: the contact loop did not converge in {max_iterations} iterations "
-            f"(impulse change {diag.residual:.2e} of the largest impulse); try a smaller dt, "
-            "more contact max_iterations or a looser contact tolerance.", step=step)
-    diag.active = int(np.sum(status != OPEN))
+        diag.converged = False
+        diag.message = (
+            f"step {step}: the contact loop did not converge in {settings.max_iterations} "
+            f"iterations (impulse change {diag.residual:.2e} of the largest impulse, "
+            f"{settings.relation} relation); try a smaller dt, more contact max_iterations, "
+            "a looser contact tolerance or local_relation = \"delassus\".")
+        if settings.on_failure == "stop":
+            raise SimulationError(diag.message, step=step)
+    diag.active = int(np.sum(np.any(P != 0.0, axis=1)))
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))
-    return ContactState(contacts, P, status), diag
+    return ContactState(contacts, P, status, gaps), diag
+
+
+def _row_sums(slots: _Slots, P: np.ndarray) -> np.ndarray:
+    """Q: the impulses summed per body contact row (+P on α, −P on β)."""
+    Q = np.zeros((int(slots.k_size.sum()), P.shape[1]))
+    a, b = slots.a_slot >= 0, slots.b_slot >= 0
+    np.add.at(Q, slots.k_off[slots.a_slot[a]] + slots.a_col[a], P[a])
+    np.add.at(Q, slots.k_off[slots.b_slot[b]] + slots.b_col[b], -P[b])
+    return Q
+
+
+def _pass_on(steps: dict, slots: _Slots, Q: np.ndarray, move: bool) -> None:
+    """Add the impulse changes to each body's b (and move its iterate when ``move``)."""
+    for slot, body in enumerate(slots.bodies):
+        q = Q[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]]
+        if not np.any(q):
+            continue
+        s = steps[body]
+        if move:
+            s.apply_impulses(slots.rows[slot], q, slots.response[slot])
+        else:
+            s.b[slots.rows[slot]] += s.impulse_weight * q
+        s.refresh()

@@ -13,7 +13,7 @@ Both residuals are gradients of an incremental potential, R = ∇Π with
 Π(u) = ½ c_m uᵀMu − b·u + s W(u) (s = θΔt or 1, W = Σ V⁰ W(F(u))), so Newton updates go
 through a backtracking (Armijo) line search on Π that also rejects updates inverting a point
 (J ≤ 0). M is the lumped or the consistent mass matrix (docs/theory.md).
-Contact impulses P are zero until the contact issue adds them.
+Contact impulses P come from the coupling loop (contact/coupling.py).
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice, NodeBox
@@ -272,6 +273,7 @@ class BodyStep:
         self.r = self.residual(u, f_int)
         self.rnorm = self.r0 = float(np.linalg.norm(self.r))
         self.pi = self.potential(u, w_int)
+        self._A = self._lu = self._v_affine = None  # Newton matrix, its LU, v(u) map
 
     # -- the step equations ------------------------------------------------------------
     def mass_times(self, u: np.ndarray) -> np.ndarray:
@@ -306,27 +308,70 @@ class BodyStep:
     # -- contact impulses (issue #3) ----------------------------------------------------
     def node_velocity(self, rows: np.ndarray) -> np.ndarray:
         """End-of-step velocity v^{n+1}(u) at active rows, from the current iterate u."""
-        st, dt, u = self.settings, self.dt, self.u[rows]
-        if self.newmark:
-            a1 = self.c_m * (u - dt * self.v_n[rows]) - (0.5 / st.beta - 1.0) * self.a_n[rows]
-            return self.v_n[rows] + dt * ((1.0 - st.gamma) * self.a_n[rows] + st.gamma * a1)
-        return (u / dt - (1.0 - st.theta) * self.v_n[rows]) / st.theta
+        kappa, v0 = self.velocity_affine()
+        return kappa * self.u[rows] + v0[rows]
 
-    def apply_impulse(self, row: int, dP: np.ndarray) -> None:
-        """Add a contact impulse change dP at an active row (−P in R, θ; −P/(γΔt), Newmark).
+    def velocity_affine(self) -> tuple[float, np.ndarray]:
+        """v^{n+1} = κ u + v⁰ on the active rows: κ = 1/(θΔt) (θ) or γ/(βΔt) (Newmark)."""
+        if self._v_affine is None:
+            st, dt = self.settings, self.dt
+            if self.newmark:
+                kappa = st.gamma * dt * self.c_m
+                v0 = (self.v_n + dt * (1.0 - st.gamma) * self.a_n
+                      - kappa * dt * self.v_n - st.gamma * dt * (0.5 / st.beta - 1.0) * self.a_n)
+            else:
+                kappa = 1.0 / (st.theta * dt)
+                v0 = -(1.0 - st.theta) / st.theta * self.v_n
+            self._v_affine = (kappa, v0)
+        return self._v_affine
 
-        The iterate moves by the local relation (Δv^{n+1} = dP/m at that node), so that the
-        Gauss–Seidel sweep sees the new velocity at once; call :meth:`refresh` before the
-        next Newton update.
+    def apply_impulses(self, rows: np.ndarray, Q: np.ndarray,
+                       response: np.ndarray | None = None) -> None:
+        """Add impulse changes Q (k, d) at distinct active ``rows`` (−P in R for θ, −P/(γΔt)
+        for Newmark) and move the iterate by the linear response, so that the velocities
+        seen by the Gauss–Seidel sweep stay consistent with u.
+
+        ``response`` (from :meth:`contact_response`) is A⁻¹ at the rows' dofs; without it the
+        lumped relation moves only the rows: Δu = w Q/(c_m m). Call :meth:`refresh` before
+        the next Newton update.
         """
-        st, dt, m = self.settings, self.dt, self.m[row]
-        if self.newmark:
-            self.b[row] += dP / (st.gamma * dt)
-            self.u[row] += st.beta * dt * dt * dP / (st.gamma * dt * m)
+        w = self.impulse_weight
+        self.b[rows] += w * Q
+        if response is None:
+            self.u[rows] += w * Q / (self.c_m * self.m[rows])
         else:
-            self.b[row] += dP
-            self.u[row] += st.theta * dt * dP / m
-        self.u[self.fixed] = dt * self.vbar[self.fixed]
+            self.u += (response @ Q.ravel()).reshape(self.u.shape)
+        self.u[self.fixed] = self.dt * self.vbar[self.fixed]
+
+    def contact_response(self, rows: np.ndarray, delassus: bool
+                         ) -> tuple[np.ndarray | None, np.ndarray]:
+        """The impulse-to-iterate map X = w A⁻¹ E (or None for the lumped relation) and the
+        local compliance W = κ w [A⁻¹]_cc (ALGORITHM.md §6) at the active ``rows``.
+
+        W is (k d × k d), rows and columns ordered (row, component); lumped: diag(1/m).
+        Fixed (Dirichlet) dofs take no impulse: their columns and rows are zero.
+        """
+        d, k = self.d, rows.size
+        kappa, _ = self.velocity_affine()
+        w = self.impulse_weight
+        dofs = (rows[:, None] * d + np.arange(d)).ravel()
+        free = ~self.fixed.ravel()
+        if not delassus:
+            W = np.diag(1.0 / self.m[rows].ravel() * free[dofs])
+            return None, W
+        E = np.zeros((self.u.size, k * d))
+        E[dofs, np.arange(k * d)] = free[dofs]
+        X = self.factorization().solve(E) * w
+        X[~free] = 0.0
+        return X, kappa * X[dofs]
+
+    def factorization(self):
+        """Sparse LU of the current Newton matrix A (reused from a direct Newton solve)."""
+        if self._lu is None:
+            if self._A is None:
+                self._A = self.newton_matrix()
+            self._lu = spla.splu(self._A.tocsc(), permc_spec="MMD_AT_PLUS_A")
+        return self._lu
 
     def refresh(self) -> None:
         """Recompute the residual and potential after impulses changed b and u."""
@@ -371,8 +416,8 @@ class BodyStep:
         while not self.converged():
             self.newton_update()
 
-    def newton_update(self) -> None:
-        """One Newton iteration: tangent, linear solve, line search."""
+    def newton_matrix(self) -> sp.bsr_matrix:
+        """A = c_m M + s K_T(u) at the current iterate, Dirichlet rows and columns unit."""
         self.internal_force(self.u, True)
         data = self.data
         if self.s_f != 1.0:
@@ -383,7 +428,11 @@ class BodyStep:
             add_diagonal(data, self.diag_slot, (self.m * self.c_m).ravel())
         constrain(data, self.indptr, self.indices, self.fixed.ravel())
         size = self.u.size
-        A = sp.bsr_matrix((data, self.indices, self.indptr), shape=(size, size))
+        return sp.bsr_matrix((data, self.indices, self.indptr), shape=(size, size))
+
+    def newton_update(self) -> None:
+        """One Newton iteration: tangent, linear solve, line search."""
+        A = self._A = self.newton_matrix()
         solver, res = self.stepper.solver, self.result
         try:
             du = solver.solve(A, -self.r.ravel(), self.diag_slot).reshape(self.u.shape)
@@ -392,6 +441,7 @@ class BodyStep:
                 f"step {self.step}: linear solve of body '{self.stepper.name}' failed at "
                 f"Newton iteration {res.iterations}: {err}", step=self.step,
                 body=self.stepper.name, residuals=res.residuals) from err
+        self._lu = solver.last_factorization
         res.iterations += 1
         res.linear_method = solver.last_method
         res.linear_iterations += solver.last_iterations

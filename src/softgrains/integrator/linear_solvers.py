@@ -35,12 +35,14 @@ class LinearSolver:
         self.use_direct = kind == "direct"
         self.last_method = ""
         self.last_iterations = 0
+        self.last_factorization = None  # the LU of the last direct solve (contact reuses it)
 
     def solve(self, A: sp.bsr_matrix, b: np.ndarray, diag_slot: np.ndarray) -> np.ndarray:
         if not self.use_direct:
             x, info, its = self._cg(A, b, diag_slot)
             if info == 0:
                 self.last_method, self.last_iterations = "cg", its
+                self.last_factorization = None
                 return x
             if self.kind == "cg":
                 raise np.linalg.LinAlgError(
@@ -48,7 +50,8 @@ class LinearSolver:
                     "(try linear_solver = \"direct\" or \"auto\")")
             self.use_direct = True
         self.last_method, self.last_iterations = "direct", 1
-        return spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A").solve(b)
+        self.last_factorization = spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A")
+        return self.last_factorization.solve(b)
 
     @staticmethod
     def _cg(A, b, diag_slot):

@@ -1,0 +1,115 @@
+"""The Gauss–Seidel sweeps over contacts with a d×d local compliance (ALGORITHM.md §5–6).
+
+Every deformable body s in contact carries, at its k_s contact rows, the velocities V_s
+(k_s, d) and the compliance W_s (k_s d × k_s d): the change of those velocities per unit
+impulse at one of them (lumped: diag(1/m); Delassus: κ w [A⁻¹]_cc). At contact c between
+α (row i) and β (row j), w = v^α_i − v^β_j and an impulse change ΔP (on α, −ΔP on β) gives
+
+    ΔV_α = W_α[:, i] ΔP,   ΔV_β = −W_β[:, j] ΔP,   Δw = (W_α[i, i] + W_β[j, j]) ΔP = W_c ΔP.
+
+Each visit applies the closed-form local solution (local_law.py) with the scalar masses
+m_n = 1/(n·W_c n) and m_t = (d − 1)/(tr W_c − n·W_c n), on w^free = w − P_n/m_n n − P_t/m_t:
+the own impulse is removed with the same scalar compliances, so that a fixed point of the
+sweeps satisfies Signorini and Coulomb exactly (removing it with the full W_c would leave
+w_t = W_tn P_n at a "sticking" fixed point). The n–t coupling of W_c still moves V. Kinematic walls (slot −1) have W = 0 and a prescribed velocity. The impulse
+changes are summed per body row in Q, to be passed on to the bodies' iterates afterwards.
+"""
+
+import numpy as np
+from numba import njit
+
+from softgrains.contact.local_law import OPEN, local_impulse
+
+
+@njit(cache=True, inline="always")
+def _add_block(W, base, kd, col, d, sign, Wc):
+    """Wc += sign · W_s[col, col] (the d×d diagonal block of one body's compliance)."""
+    for p in range(d):
+        for q in range(d):
+            Wc[p, q] += sign * W[base + (col * d + p) * kd + col * d + q]
+
+
+@njit(cache=True, inline="always")
+def _spread(W, base, kd, k, col, d, sign, dP, V, v_off):
+    """V_s += sign · W_s[:, col] ΔP (the velocity change of all of a body's contact rows)."""
+    for r in range(k):
+        for p in range(d):
+            acc = 0.0
+            for q in range(d):
+                acc += W[base + (r * d + p) * kd + col * d + q] * dP[q]
+            V[v_off + r, p] += sign * acc
+
+
+@njit(cache=True)
+def gauss_seidel(a_slot, a_col, b_slot, b_col, wall_va, wall_vb, normal, gap_over_dt, mu,
+                 k_off, w_off, k_size, W, V, Q, P, status, tolerance, floor, max_sweeps):
+    """Sweep until max|ΔP| ≤ tolerance·max|P| + floor; P, status, V and Q updated in place.
+
+    Returns (sweeps, last max|ΔP|).
+    """
+    n, d = normal.shape
+    Wc = np.empty((d, d))
+    w_free = np.empty(d)
+    P_new = np.empty(d)
+    dP = np.empty(d)
+    sweeps = 0
+    change = 0.0
+    for _ in range(max_sweeps):
+        change = 0.0
+        largest = 0.0
+        for c in range(n):
+            sa, sb = a_slot[c], b_slot[c]
+            Wc[:, :] = 0.0
+            if sa >= 0:
+                _add_block(W, w_off[sa], k_size[sa] * d, a_col[c], d, 1.0, Wc)
+            if sb >= 0:
+                _add_block(W, w_off[sb], k_size[sb] * d, b_col[c], d, 1.0, Wc)
+            wnn = 0.0
+            trace = 0.0
+            for p in range(d):
+                trace += Wc[p, p]
+                for q in range(d):
+                    wnn += normal[c, p] * Wc[p, q] * normal[c, q]
+            if wnn <= 0.0:
+                continue  # no body can move at this node
+            wtt = (trace - wnn) / (d - 1)  # mean tangential compliance
+            m_t = 1.0 / wtt if wtt > 1e-12 * wnn else 0.0
+            pn = 0.0
+            for p in range(d):
+                pn += P[c, p] * normal[c, p]
+            for p in range(d):
+                va = V[k_off[sa] + a_col[c], p] if sa >= 0 else wall_va[c, p]
+                vb = V[k_off[sb] + b_col[c], p] if sb >= 0 else wall_vb[c, p]
+                # own impulse removed with the same scalar compliances the local law uses,
+                # so that a fixed point satisfies Signorini–Coulomb exactly
+                w_free[p] = (va - vb - wnn * pn * normal[c, p]
+                             - (wtt if m_t > 0.0 else 0.0) * (P[c, p] - pn * normal[c, p]))
+            status[c] = local_impulse(w_free, normal[c], 1.0 / wnn, m_t, gap_over_dt[c],
+                                      mu[c], P_new)
+            moved = 0.0
+            for p in range(d):
+                dP[p] = P_new[p] - P[c, p]
+                moved = max(moved, abs(dP[p]))
+                largest = max(largest, abs(P_new[p]))
+            if moved == 0.0:
+                continue
+            if sa >= 0:
+                _spread(W, w_off[sa], k_size[sa] * d, k_size[sa], a_col[c], d, 1.0, dP, V,
+                        k_off[sa])
+                for p in range(d):
+                    Q[k_off[sa] + a_col[c], p] += dP[p]
+            if sb >= 0:
+                _spread(W, w_off[sb], k_size[sb] * d, k_size[sb], b_col[c], d, -1.0, dP, V,
+                        k_off[sb])
+                for p in range(d):
+                    Q[k_off[sb] + b_col[c], p] -= dP[p]
+            for p in range(d):
+                P[c, p] = P_new[p]
+            change = max(change, moved)
+        sweeps += 1
+        if change <= tolerance * largest + floor:
+            break
+    for c in range(n):
+        if P[c, 0] == 0.0 and (d < 2 or P[c, 1] == 0.0) and (d < 3 or P[c, 2] == 0.0):
+            status[c] = OPEN
+    return sweeps, change
