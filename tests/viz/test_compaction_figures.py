@@ -1,0 +1,230 @@
+"""plot_compaction draws the curves, snapshots and animations of compaction runs."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from matplotlib.collections import PolyCollection
+from matplotlib.image import imread
+from PIL import Image
+
+from softgrains.errors import CaseError
+from softgrains.io.vtk import PvdSeries, write_points_vtu
+from softgrains.viz.compaction import (
+    _load_run,
+    _phi_sigma_figure,
+    _side_by_side_figure,
+    _subsample,
+    plot_compaction,
+)
+
+COLUMNS = [
+    "step", "time", "phase", "phi", "stress_yy", "stress_xx", "stress_mean_avg", "wall_gap",
+    "coordination", "coordination_walls", "rattler_fraction",
+]  # fmt: skip
+H0, WIDTH, END_TIME = 1.0, 1.0, 1.0
+
+
+def _points(gap: float, stiffness: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Two disks of grid points squashed to ``gap``, between a bottom and a top wall row."""
+    spacing = 0.1
+    grid = np.stack(np.meshgrid(np.arange(-2, 3), np.arange(-2, 3)), axis=-1).reshape(-1, 2)
+    disk = spacing * grid[np.hypot(grid[:, 0], grid[:, 1]) <= 2.2]
+    squash = gap / H0
+    grains = np.concatenate([disk + [0.3, 0.25], disk + [0.7, 0.75]]) * [1.0, squash]
+    wall_x = np.arange(0.05, WIDTH, spacing)
+    walls = np.concatenate(
+        [np.stack([wall_x, np.full_like(wall_x, -0.05)], axis=1),
+         np.stack([wall_x, np.full_like(wall_x, gap + 0.05)], axis=1)]
+    )  # fmt: skip
+    positions = np.concatenate([grains, walls])
+    n_grains, n = len(grains), len(positions)
+    kinematic = np.r_[np.zeros(n_grains, int), np.ones(n - n_grains, int)]
+    von_mises = np.r_[stiffness * (1.0 - squash) * (1.0 + grains[:, 1]), np.zeros(n - n_grains)]
+    point_data = {
+        "body": np.r_[np.repeat([0, 1], n_grains // 2), np.full(n - n_grains, 2)],
+        "kinematic": kinematic,
+        "volume": np.full(n, spacing**2 * squash),
+        "von_mises": von_mises,
+    }
+    return positions, point_data
+
+
+def _make_run(
+    folder: Path,
+    label: str | None,
+    *,
+    final_gap: float = 0.7,
+    snapshots: int = 7,
+    stiffness: float = 1e4,
+    protocol: bool = True,
+) -> Path:
+    """A synthetic run folder: series.csv, summary.json and (optionally) snapshots."""
+    folder.mkdir(parents=True)
+    times = np.linspace(0.0, END_TIME, 21)
+    start = times[4]
+    with (folder / "series.csv").open("w", newline="") as file:
+        writer = csv.writer(file)
+        writer.writerow(COLUMNS)
+        for step, time in enumerate(times):
+            s = max(0.0, (time - start) / (END_TIME - start))
+            gap = H0 - s * (H0 - final_gap)
+            phi = 0.6 * H0 / gap
+            sigma = stiffness * (1e-3 + (H0 - gap) ** 2)
+            phase = "precompaction" if time < start else "compaction"
+            row = [step, time, phase, phi, sigma, 0.5 * sigma, 0.75 * sigma, gap, 3 + s, s, 0.1]
+            writer.writerow(row)
+    summary: dict[str, object] = {"steps": 21}
+    if protocol:
+        summary["protocol"] = {"sigma0": 1e3, "phi0": 0.6, "h0": H0, "friction": 0.3}
+        if label is not None:
+            summary["protocol"]["label"] = label
+    (folder / "summary.json").write_text(json.dumps(summary))
+    if snapshots:
+        pvd = PvdSeries(folder / "snapshots" / "points.pvd")
+        for index, time in enumerate(np.linspace(start, END_TIME, snapshots)):
+            s = (time - start) / (END_TIME - start)
+            name = f"points_{index:08d}.vtu"
+            write_points_vtu(
+                folder / "snapshots" / name, *_points(H0 - s * (H0 - final_gap), stiffness)
+            )
+            pvd.add(time, name)
+    return folder
+
+
+def _assert_png(path: Path) -> None:
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    image = imread(path)
+    assert image.shape[0] > 200 and image.shape[1] > 200
+
+
+def test_two_runs_write_every_figure(tmp_path: Path) -> None:
+    soft = _make_run(tmp_path / "soft", "Soft μ=0.3", stiffness=1e4)
+    stiff = _make_run(tmp_path / "stiff", "Stiff", final_gap=0.8, snapshots=5, stiffness=5e4)
+    out = tmp_path / "figures"
+    paths = plot_compaction([soft, stiff], out)
+    names = [path.name for path in paths]
+    assert names == [
+        "phi_sigma.png",
+        "coordination.png",
+        "snapshots_soft-0-3.png",
+        "snapshots_stiff.png",
+        "side_by_side.png",
+        "animation_soft-0-3.gif",
+        "animation_stiff.gif",
+    ]
+    for path in paths:
+        assert path.parent == out and path.is_file()
+        if path.suffix == ".png":
+            _assert_png(path)
+    with Image.open(out / "animation_soft-0-3.gif") as gif:
+        assert gif.format == "GIF"
+        assert gif.n_frames == 7
+        assert gif.size == (320, 320)
+    with Image.open(out / "animation_stiff.gif") as gif:
+        assert gif.n_frames == 5
+
+
+def test_one_run_uses_plain_names_and_folder_label(tmp_path: Path) -> None:
+    run = _make_run(tmp_path / "run_a", None, snapshots=3)
+    assert _load_run(run).label == "run_a"
+    paths = plot_compaction([run], tmp_path / "out")
+    assert [path.name for path in paths] == [
+        "phi_sigma.png",
+        "coordination.png",
+        "snapshots.png",
+        "animation.gif",
+    ]
+
+
+def test_animation_frames_are_subsampled() -> None:
+    assert list(_subsample(5)) == [0, 1, 2, 3, 4]
+    picks = _subsample(500)
+    assert len(picks) == 60 and picks[0] == 0 and picks[-1] == 499
+    assert np.all(np.diff(picks) > 0)
+
+
+def test_phi_sigma_axes(tmp_path: Path) -> None:
+    runs = [
+        _load_run(_make_run(tmp_path / "a", "A", snapshots=0)),
+        _load_run(_make_run(tmp_path / "b", "B", snapshots=0)),
+    ]
+    figure = _phi_sigma_figure(runs)
+    (ax,) = figure.axes
+    assert ax.get_xscale() == "log"
+    assert "sigma_{yy}/\\sigma_0" in ax.get_xlabel()
+    assert "phi/\\phi_0" in ax.get_ylabel()
+    labels = [text.get_text() for text in ax.get_legend().get_texts()]
+    assert labels[:2] == ["A", "B"] and "phi = 1" in labels[2]
+    limit = [line for line in ax.get_lines() if line.get_linestyle() == "--"]
+    assert len(limit) == 1  # same phi0: one limit line
+    assert limit[0].get_ydata()[0] == pytest.approx(1 / 0.6)
+    # only the compaction rows are drawn (17 of 21)
+    assert len(ax.get_lines()[0].get_xdata()) == 17
+
+
+def test_side_by_side_shares_one_colour_scale(tmp_path: Path) -> None:
+    soft = _load_run(_make_run(tmp_path / "soft", "Soft", stiffness=1e4))
+    stiff = _load_run(_make_run(tmp_path / "stiff", "Stiff", final_gap=0.8, stiffness=5e4))
+    figure = _side_by_side_figure(soft, stiff)
+    panels = [ax for ax in figure.axes if ax.get_title()]
+    assert len(panels) == 2
+    grains = [
+        next(
+            c for c in ax.collections if isinstance(c, PolyCollection) and c.get_array() is not None
+        )
+        for ax in panels
+    ]
+    assert grains[0].norm is grains[1].norm
+    assert grains[0].get_clim() == grains[1].get_clim()
+    assert grains[0].get_clim()[1] > 0
+    # the same strain: the stiff run stops at 0.2, so both panels are near strain 0.2
+    for ax in panels:
+        assert "Soft" in ax.get_title() or "Stiff" in ax.get_title()
+        assert "0.200" in ax.get_title()
+
+
+def test_run_without_snapshots_gets_only_curves(tmp_path: Path) -> None:
+    bare = _make_run(tmp_path / "bare", "bare", snapshots=0)
+    paths = plot_compaction([bare], tmp_path / "out")
+    assert [path.name for path in paths] == ["phi_sigma.png", "coordination.png"]
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == [
+        "coordination.png",
+        "phi_sigma.png",
+    ]
+    # with another run that has snapshots: no side-by-side (only one run has them)
+    full = _make_run(tmp_path / "full", "full", snapshots=3)
+    names = [path.name for path in plot_compaction([bare, full], tmp_path / "out2")]
+    assert names == [
+        "phi_sigma.png",
+        "coordination.png",
+        "snapshots_full.png",
+        "animation_full.gif",
+    ]
+
+
+def test_missing_series_is_a_case_error(tmp_path: Path) -> None:
+    folder = tmp_path / "empty"
+    folder.mkdir()
+    with pytest.raises(CaseError, match=r"empty: no series\.csv"):
+        plot_compaction([folder], tmp_path / "out")
+
+
+def test_missing_protocol_is_a_case_error(tmp_path: Path) -> None:
+    good = _make_run(tmp_path / "good", "good", snapshots=0)
+    folder = _make_run(tmp_path / "noproto", "x", snapshots=0, protocol=False)
+    with pytest.raises(CaseError, match=r"noproto.*no 'protocol'"):
+        plot_compaction([good, folder], tmp_path / "out")
+    assert not (tmp_path / "out").exists()  # nothing written before all runs are checked
+
+
+def test_missing_phi_column_is_a_case_error(tmp_path: Path) -> None:
+    folder = tmp_path / "nophi"
+    folder.mkdir()
+    (folder / "series.csv").write_text("step,time,phase\n0,0.0,compaction\n")
+    with pytest.raises(CaseError, match=r"nophi.*missing compaction columns phi, stress_yy"):
+        plot_compaction([folder], tmp_path / "out")
