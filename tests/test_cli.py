@@ -43,7 +43,7 @@ def test_check_example_via_python_m() -> None:
         ("bodies.0.material=steel", "[bodies.0.material]"),
         ("simulation.steps=100", "[simulation.steps]"),
         ("grid.cell_size=1e-6", "[grid.cell_size]"),
-        ("sample.count=30", "[sample]: unknown key"),
+        ("samples.count=30", "[samples]: unknown key"),
     ],
 )
 def test_check_invalid_case_exits_2_naming_the_key(

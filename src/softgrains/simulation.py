@@ -28,14 +28,17 @@ from softgrains.io import (
 )
 from softgrains.model import build
 from softgrains.observe.bodies import body_columns, body_records
+from softgrains.observe.compaction import COMPACTION_COLUMNS
 from softgrains.observe.energies import kinetic_energy, strain_energy
 from softgrains.observe.stress import von_mises
+from softgrains.protocol import UniaxialCompaction
 from softgrains.solver import Solver, StepDiagnostics
 
 SERIES_COLUMNS = [
     "step", "time", "dt", "newton_iterations", "contact_iterations", "contact_residual",
     "n_contacts", "kinetic_energy", "strain_energy", "gravity_energy", "total_energy",
-    "momentum_x", "momentum_y", "newton_residual", "linear_solver", "wall_time",
+    "momentum_x", "momentum_y", "newton_residual", "linear_solver", "contact_sweeps",
+    "contact_nodes", "contact_sticking", "contact_sliding", "contact_converged", "wall_time",
 ]
 
 
@@ -50,11 +53,22 @@ class Simulation:
             numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
         self.model, self.state = build(case)
         self.solver = Solver(self.model)
-        self.dt = case.simulation.dt
+        self.dt = self.last_dt = case.simulation.dt
         self.n_steps = case.simulation.n_steps
         self._rows: list[dict[str, object]] = []
         self._gravity_energy0 = 0.0
         self.last_diagnostics = StepDiagnostics()
+        self.protocol = None
+        self._protocol_row: dict[str, object] = {}
+        self.unconverged_contact_steps = 0
+        if case.protocol is not None:
+            self.protocol = UniaxialCompaction(case.protocol, self.model, case.layout.width,
+                                               case.contact.friction, self.dt)
+
+    @property
+    def columns(self) -> list[str]:
+        """The columns of series.csv for this case."""
+        return SERIES_COLUMNS + (COMPACTION_COLUMNS if self.protocol is not None else [])
 
     # -- observables -------------------------------------------------------------------
     def series_row(self, wall_time: float = 0.0) -> dict[str, object]:
@@ -68,15 +82,28 @@ class Simulation:
         mom = (m.mass[deformable, None] * s.v[deformable]).sum(axis=0)
         residual = max((r.residuals[-1] for r in dg.bodies.values() if r.residuals), default=0.0)
         return {
-            "step": s.step, "time": s.time, "dt": self.dt,
+            "step": s.step, "time": s.time, "dt": self.last_dt,
             "newton_iterations": dg.newton_iterations,
             "contact_iterations": dg.contact.iterations,
             "contact_residual": dg.contact.residual, "n_contacts": dg.contact.active,
             "kinetic_energy": ek,
             "strain_energy": es, "gravity_energy": eg, "total_energy": ek + es + eg,
             "momentum_x": mom[0], "momentum_y": mom[1], "newton_residual": residual,
-            "linear_solver": dg.linear_method or "-", "wall_time": wall_time,
+            "linear_solver": dg.linear_method or "-", "contact_sweeps": dg.contact.sweeps,
+            "contact_nodes": dg.contact.n_contacts, "contact_sticking": dg.contact.sticking,
+            "contact_sliding": dg.contact.sliding,
+            "contact_converged": int(dg.contact.converged), "wall_time": wall_time,
+            **self._protocol_observables(),
         }
+
+    def _protocol_observables(self) -> dict[str, object]:
+        if self.protocol is None:
+            return {}
+        if not self._protocol_row:  # before the first step: no forces yet
+            m = self.model
+            self._protocol_row = self.protocol.observe(
+                self.state, np.zeros((len(m.bodies), m.dim)), None)
+        return self._protocol_row
 
     @property
     def series(self) -> dict[str, np.ndarray]:
@@ -87,18 +114,48 @@ class Simulation:
 
     def snapshot_data(self) -> dict[str, np.ndarray]:
         m, s = self.model, self.state
-        return {"body": m.body_id.astype(np.int32), "velocity": s.v, "stress": s.sigma,
-                "von_mises": von_mises(s.sigma), "J": np.linalg.det(s.F), "mass": m.mass}
+        kinematic = np.array([not b.deformable for b in m.bodies], np.int32)[m.body_id]
+        return {"body": m.body_id.astype(np.int32), "kinematic": kinematic,
+                "velocity": s.v, "stress": s.sigma, "von_mises": von_mises(s.sigma),
+                "J": np.linalg.det(s.F), "mass": m.mass, "volume": s.vol}
 
     # -- stepping ----------------------------------------------------------------------
     def step(self) -> StepDiagnostics:
-        """One implicit step; raises SimulationError on failure."""
-        self.last_diagnostics = self.solver.step(self.state, self.dt)
+        """One implicit step (the protocol drives the walls first); raises SimulationError
+        on failure."""
+        if self.protocol is not None:
+            self.protocol.before_step(self.state)
+        dt = self.last_dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        dg = self.last_diagnostics = self.solver.step(self.state, dt)
         if not np.all(np.isfinite(self.state.x)) or not np.all(np.isfinite(self.state.v)):
             raise SimulationError(
                 f"step {self.state.step}: non-finite positions or velocities; try a smaller "
                 "dt or a finer grid.", step=self.state.step)
-        return self.last_diagnostics
+        if not dg.contact.converged:
+            self.unconverged_contact_steps += 1
+        if self.protocol is not None:
+            m, s = self.model, self.state
+            grains = m.deformable_points
+            forces = dg.contact_forces(len(m.bodies), m.dim, dt)
+            ek = np.zeros(len(m.bodies))
+            np.add.at(ek, m.body_id, 0.5 * m.mass * np.einsum("ij,ij->i", s.v, s.v))
+            es = strain_energy(m.law[grains], s.F[grains], m.lam[grains], m.mu[grains],
+                               m.vol0[grains])
+            self._protocol_row = self.protocol.after_step(s, forces, dg.contacts, ek, es)
+        return dg
+
+    @property
+    def at_end(self) -> bool:
+        """True at the end of the run: end_time or steps reached, or the protocol's stop."""
+        sim = self.case.simulation
+        if sim.steps is not None:
+            return self.state.step >= sim.steps or self.finished
+        return self.state.time >= sim.end_time - 1e-9 * self.dt or self.finished
+
+    @property
+    def finished(self) -> bool:
+        """True when the protocol's stop criterion has been met."""
+        return self.protocol is not None and self.protocol.finished
 
     def run(self) -> dict[str, object]:
         """Run to the end, writing all outputs when an output folder was given."""
@@ -110,7 +167,7 @@ class Simulation:
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
             (out / "case.toml").write_text(case_to_toml(self.case))
-            series = CsvTable(out / "series.csv", SERIES_COLUMNS)
+            series = CsvTable(out / "series.csv", self.columns)
             bodies = CsvTable(out / "bodies.csv", body_columns(self.model.dim))
             tables = [series, bodies]
             if cfg.snapshot_interval > 0:
@@ -129,7 +186,7 @@ class Simulation:
             if series is not None:
                 series.append(row)
                 forces = self.last_diagnostics.contact_forces(
-                    len(self.model.bodies), self.model.dim, self.dt)
+                    len(self.model.bodies), self.model.dim, self.last_dt)
                 for r in body_records(self.model, self.state, forces):
                     bodies.append(r)
             return row
@@ -147,20 +204,37 @@ class Simulation:
             record(0.0)
             if pvd is not None:
                 snapshot()
-            for _ in range(self.n_steps):
+            events = self.protocol.events if self.protocol is not None else []
+            while not self.at_end:
+                phase = self.protocol.phase if self.protocol is not None else None
                 self.step()
                 k = self.state.step
                 wall = _time.perf_counter() - t0
                 if self._t_after_first_step is None:
                     self._t_after_first_step = wall
-                if k % cfg.interval == 0 or k == self.n_steps:
+                last = self.at_end
+                dg = self.last_diagnostics
+                if not dg.contact.converged and log is not None:
+                    log.warning("%s (going on: [contact] on_failure = \"warn\")",
+                                dg.contact.message)
+                changed = self.protocol is not None and self.protocol.phase != phase
+                if k % cfg.interval == 0 or last or changed:
                     row = record(wall)
-                    progress.update(k, self.state.time, E=f"{row['total_energy']:.4g}")
-                if pvd is not None and (k % cfg.snapshot_interval == 0 or k == self.n_steps):
+                    progress.update(k, self.state.time, **self._progress_figures(row))
+                while events and log is not None:
+                    log.info("%s", events.pop(0))
+                if pvd is not None and (k % cfg.snapshot_interval == 0 or last or changed):
                     snapshot()
                 if log is not None and not progress.active and k % log_every == 0:
-                    log.info("step %d/%d  t = %.6g s  newton %d  (%.1f s)", k, self.n_steps,
-                             self.state.time, self.last_diagnostics.newton_iterations, wall)
+                    log.info("step %d/%d  t = %.6g s  newton %d  contact %d  (%.1f s)%s", k,
+                             self.n_steps, self.state.time, dg.newton_iterations,
+                             dg.contact.iterations, wall, self._log_figures())
+                if self.finished:
+                    break
+            if self.protocol is not None and not self.protocol.finished and log is not None:
+                log.warning("the run reached its end (simulation.end_time / steps) in the %s "
+                            "phase before the protocol's stop criterion; raise end_time to "
+                            "go further", self.protocol.phase)
         except SimulationError as err:
             status, message = "failed", str(err)
             if log is not None:
@@ -184,6 +258,20 @@ class Simulation:
                 close_run_log(log)
         return summary
 
+    def _progress_figures(self, row: dict[str, object]) -> dict[str, object]:
+        if self.protocol is None:
+            return {"E": f"{row['total_energy']:.4g}"}
+        sigma0 = self.protocol.settings.sigma0
+        return {"phase": row["phase"], "phi": f"{row['phi']:.4f}",
+                "σ/σ0": f"{row['stress_yy'] / sigma0:.3g}"}
+
+    def _log_figures(self) -> str:
+        if self.protocol is None or not self._protocol_row:
+            return ""
+        r = self._protocol_row
+        return (f"  {r['phase']}: phi = {r['phi']:.4f}, sigma_yy = {r['stress_yy']:.4g} Pa, "
+                f"Z = {r['coordination']:.2f}")
+
     def _summary(self, status: str, message: str, wall: float) -> dict[str, object]:
         steps = self.state.step
         last = self._rows[-1] if self._rows else {}
@@ -200,5 +288,7 @@ class Simulation:
             "wall_time_s": wall, "first_step_s": first, "time_per_step_s": per_step,
             "point_updates_per_second": self.model.n_points / per_step if per_step > 0 else 0.0,
             "threads": numba.get_num_threads(), "final": last,
+            "unconverged_contact_steps": self.unconverged_contact_steps,
+            "protocol": self.protocol.summary() if self.protocol is not None else None,
             "software": software_versions(),
         }

@@ -83,7 +83,10 @@ def message_of(data: dict, overrides: object = None) -> str:
         ({"grid.size": [1.0, -1.0]}, "[grid.size.1] = -1.0: must be > 0"),
         ({"grid.origin": [0.0]}, "[grid.origin] = [0.0]: must have 2 entries (one per axis)"),
         ({"output.progress": 1}, "[output.progress] = 1: must be true or false, not an integer"),
-        ({"sample": {"count": 30}}, "[sample]: unknown key; expected one of 'simulation'"),
+        ({"samples": {"count": 30}}, "[samples]: unknown key; did you mean 'sample'?"),
+        ({"sample": {"count": 30}}, "[sample.mean_diameter]: required"),
+        ({"protocol": {"kind": "uniaxial-compaction", "sigma0": 1.0}},
+         '[protocol.kind] = "uniaxial-compaction": needs a [sample]'),
         ({"bodies.0.radius": None}, "[bodies.0.radius]: required for shape = 'disk'"),
         ({"bodies.0.lower": [0, 0]}, "[bodies.0.lower] = [0.0, 0.0]: only for shape = 'rectangle'"),
         (
@@ -91,7 +94,7 @@ def message_of(data: dict, overrides: object = None) -> str:
             "[bodies.0.velocity_gradient] = [[0.0, 0.0], [0.0, 0.0]]: only for kind = 'deformable'",
         ),
         ({"bodies.0.material": None}, "[bodies.0.material]: required key is missing"),
-        ({"bodies": []}, "[bodies] = []: must have at least 1 entry"),
+        ({"bodies": []}, "[bodies]: required: give [[bodies]] or a [sample]"),
         ({"bodies": [1]}, "[bodies.0] = 1: must be a table, not an integer"),
         ({"gravity": {"acceleration": [0, float("inf")]}}, "must be a finite number"),
         (
@@ -200,7 +203,7 @@ def test_overrides_as_a_dict_take_python_values_without_mutating_the_input() -> 
     ("override", "expected"),
     [
         ("simulation.dtt=1", "[simulation.dtt]: unknown key; did you mean 'dt'?"),
-        ("sample.count=30", "[sample]: unknown key"),
+        ("samples.count=30", "[samples]: unknown key"),
         ("bodies.1.radius=0.1", "'1' is not an index of [bodies], an array of length 1"),
         ("bodies.x.radius=0.1", "'x' is not an index of [bodies]"),
         ("simulation.dt.x=1", "[simulation.dt] = 0.001 is not a table or an array"),

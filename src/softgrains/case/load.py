@@ -67,7 +67,10 @@ def load_case(
 def case_to_toml(case: Case) -> str:
     """The fully resolved case (defaults filled in) as TOML text, readable by load_case."""
     header = "# Fully resolved softgrains case: every default filled in.\n"
-    return header + tomli_w.dumps(_without_none(case.model_dump()))
+    data = case.model_dump()
+    data["bodies"] = [table for table, body in zip(data["bodies"], case.bodies, strict=True)
+                      if not body.generated]  # [sample] makes them again, the same
+    return header + tomli_w.dumps(_without_none(data))
 
 
 def summarize(case: Case) -> str:

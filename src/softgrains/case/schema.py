@@ -12,7 +12,7 @@ import difflib
 import math
 from typing import Annotated, Literal, NamedTuple
 
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, model_validator
 
 MAX_POINTS = 2e7
 """Largest accepted estimated number of material points (all bodies together)."""
@@ -83,6 +83,9 @@ class SimulationSettings(_Section):
     newton_tolerance: float = Field(1e-8, gt=0.0, lt=1.0, description="relative residual")
     newton_max_iterations: int = Field(25, ge=1, le=200, description="Newton iteration limit")
     linear_solver: Literal["auto", "direct", "cg"] = Field("auto", description="linear solver")
+    tangent: Literal["projected", "exact"] = Field(
+        "projected", description="Newton matrix: per-point tangents made positive "
+        "semi-definite (robust under compression) or exact (quadratic convergence)")
 
     @property
     def n_steps(self) -> int:
@@ -127,7 +130,8 @@ class GridSettings(_Section):
 
     cell_size: float = Field(gt=0, description="cell size h [m]")
     origin: list[float] = Field(default_factory=_zero_vector, description="lower corner [m]")
-    size: list[PositiveFloat] = Field(description="extent of the domain per axis [m]")
+    size: list[PositiveFloat] | None = Field(
+        None, description="extent of the domain per axis [m] (default with [sample]: the box)")
     shape_function: Literal["linear", "bspline2"] = Field("linear", description="shape functions")
     points_per_cell: int = Field(2, ge=1, le=6, description="material points per cell per axis")
 
@@ -178,6 +182,11 @@ class Body(_Section):
         None, description="initial velocity gradient L [1/s]: adds L (x - centroid)"
     )
     velocity_sine: VelocitySine | None = Field(None, description="initial sine velocity field")
+    _generated: bool = PrivateAttr(False)  # made by [sample], not written back
+
+    @property
+    def generated(self) -> bool:
+        return self._generated
 
     def area(self) -> float:
         """Area of the shape [m^2]."""
@@ -280,6 +289,47 @@ class ContactSettings(_Section):
         "the step in series.csv and go on")
 
 
+class SampleSettings(_Section):
+    """``[sample]``: grains deposited at random (seeded) in a box of four kinematic walls."""
+
+    count: int = Field(ge=1, le=100000, description="number of disks")
+    mean_diameter: float = Field(gt=0, description="mean diameter d [m]")
+    polydispersity: float = Field(
+        0.2, ge=0.0, lt=1.0, description="diameters uniform in [d(1-p), d(1+p)]")
+    box_width: float = Field(gt=0, description="inner width of the box [m]")
+    material: str = Field(description="material of the grains")
+    wall_material: str | None = Field(None, description="material of the walls (default: "
+                                      "the grains')")
+    wall_thickness: float | None = Field(None, gt=0, description="[m] (default: 3 cells)")
+    clearance: float | None = Field(
+        None, ge=0, description="gap left between grains and walls at the deposit [m] "
+        "(default: one point spacing)")
+
+
+class ProtocolSettings(_Section):
+    """``[protocol]``: a loading programme driving the walls of a ``[sample]``."""
+
+    kind: Literal["uniaxial-compaction"] = Field(description="the protocol")
+    sigma0: float = Field(gt=0, description="pre-compaction stress σ0 on the top wall [Pa]")
+    wall_speed: float = Field(5.0, gt=0, description="top-wall speed in compaction [m/s]")
+    precompaction_speed: float = Field(
+        0.05, gt=0, description="largest top-wall speed of the stress control [m/s]")
+    precompaction_dt: float | None = Field(
+        None, gt=0, description="time step of the pre-compaction [s] (default: dt)")
+    stress_tolerance: float = Field(
+        0.01, gt=0, lt=1, description="equilibrium: |σ − σ0| ≤ tolerance σ0")
+    kinetic_ratio: float = Field(
+        1e-3, gt=0, lt=1, description="equilibrium: kinetic ≤ ratio × strain energy")
+    precompaction_max_steps: int | None = Field(
+        None, ge=1, description="start the compaction after this many pre-compaction steps "
+        "even out of equilibrium (logged)")
+    stop_stress_ratio: float | None = Field(
+        1000.0, gt=1, description="stop when σ_yy/σ0 reaches this")
+    stop_packing_fraction: float | None = Field(
+        None, gt=0, lt=1, description="stop when φ reaches this")
+    label: str = Field("", description="name of the run in figures (default: from friction)")
+
+
 class OutputSettings(_Section):
     """``[output]``: what is written, and how often."""
 
@@ -294,16 +344,28 @@ class Case(_Section):
     simulation: SimulationSettings
     grid: GridSettings
     materials: dict[str, Material] = Field(min_length=1)
-    bodies: list[Body] = Field(min_length=1)
+    bodies: list[Body] = Field(default_factory=list)
+    sample: SampleSettings | None = None
+    protocol: ProtocolSettings | None = None
     boundary: list[Boundary] = Field(default_factory=list)
     gravity: Gravity = Field(default_factory=Gravity)
     contact: ContactSettings = Field(default_factory=ContactSettings)
     output: OutputSettings = Field(default_factory=OutputSettings)
 
+    _layout: object = PrivateAttr(None)
+
+    @property
+    def user_bodies(self) -> list[Body]:
+        """The bodies written in the case file (not those generated by ``[sample]``)."""
+        return [b for b in self.bodies if not b.generated]
+
     @model_validator(mode="after")
     def _check_consistency(self) -> Case:
         for index, body in enumerate(self.bodies):
             body.name = body.name or f"body{index}"
+        problems = self._sample_problems()
+        if problems:
+            raise Problems(problems)
         problems = self._length_problems()
         if not problems:  # the other checks rely on vectors of the right length
             problems = self._reference_problems() + self._geometry_problems()
@@ -315,6 +377,65 @@ class Case(_Section):
         if problems:
             raise Problems(problems)
         return self
+
+    def _sample_problems(self) -> list[Problem]:
+        """Generate the ``[sample]`` grains and walls (and the grid extent when not given);
+        a protocol needs a sample; there must be a body."""
+        sample, grid = self.sample, self.grid
+        if self.protocol is not None and sample is None:
+            return [Problem(("protocol", "kind"), self.protocol.kind,
+                            "needs a [sample] (its walls are what the protocol drives)")]
+        if sample is None:
+            if grid.size is None:
+                return [Problem(("grid", "size"), MISSING,
+                                "required (it has a default only with a [sample])")]
+            if not self.bodies:
+                return [Problem(("bodies",), MISSING, "required: give [[bodies]] or a [sample]")]
+            return []
+        from softgrains.sample import box_layout  # light: NumPy only
+
+        problems = []
+        for key in ("material", "wall_material"):
+            name = getattr(sample, key)
+            if name is not None and name not in self.materials:
+                problems.append(Problem(("sample", key), name, "no such material"
+                                        + suggest(name, list(self.materials))))
+        if problems:
+            return problems
+        spacing = grid.cell_size / grid.points_per_cell
+        points = sample.count * math.pi / 4 * (sample.mean_diameter / spacing) ** 2
+        if points > MAX_POINTS:
+            message = (f"gives about {points:.3g} material points in the grains, at most "
+                       f"{MAX_POINTS:.0e} allowed: fewer or smaller grains, or a larger "
+                       "grid.cell_size")
+            return [Problem(("sample", "count"), sample.count, message)]
+        try:
+            layout = box_layout(
+                sample.count, sample.mean_diameter, sample.polydispersity, sample.box_width,
+                self.simulation.seed,
+                spacing if sample.clearance is None else sample.clearance,
+                sample.wall_thickness or 3.0 * grid.cell_size)
+        except ValueError as error:
+            return [Problem(("sample",), f"count = {sample.count}", str(error))]
+        self.bodies = [b for b in self.bodies if not b.generated]
+        names = {b.name for b in self.bodies}
+        for table in layout.body_tables(sample.material, sample.wall_material or
+                                        sample.material):
+            if table["name"] in names:
+                return [Problem(("bodies",), table["name"],
+                                "this name is taken by a generated [sample] body; rename it")]
+            body = Body(**table)
+            body._generated = True
+            self.bodies.append(body)
+        if grid.size is None:
+            grid.origin, grid.size = layout.domain(grid.cell_size)
+        self._layout = layout
+        return []
+
+    @property
+    def layout(self):
+        """The generated box (``sample.box.BoxLayout``), or None without a [sample]."""
+        return self._layout
 
     def _length_problems(self) -> list[Problem]:
         """Every vector must have one entry per axis (every matrix one row per axis)."""

@@ -124,8 +124,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     is used. ``warm``: the previous step's contacts (warm start).
     """
     contacts = find_contact_nodes(lattice, fields, {b: s for b, (_, s) in walls.items()})
-    # a node below a body's activity threshold carries no unknown there: no contact
-    usable = np.ones(len(contacts), bool)
+    # a node below a body's activity threshold carries no unknown there: no contact; two
+    # kinematic bodies do not interact
+    usable = np.array([int(a) in steps or int(b) in steps
+                       for a, b in zip(contacts.alpha, contacts.beta, strict=True)], bool)
     for bodies, local in ((contacts.alpha, contacts.local_alpha),
                           (contacts.beta, contacts.local_beta)):
         for c in range(len(contacts)):
@@ -239,4 +241,4 @@ def _pass_on(steps: dict, slots: _Slots, Q: np.ndarray, move: bool) -> None:
             s.apply_impulses(slots.rows[slot], q, slots.response[slot])
         else:
             s.b[slots.rows[slot]] += s.impulse_weight * q
-        s.refresh()
+            s.refresh()

@@ -103,9 +103,46 @@ def block_pattern(active_row, box_shape, s):
     return indptr, indices[:nnz].copy(), slot, diag_slot
 
 
+@njit(cache=True)
+def project_to_psd(Av, p, M):
+    """Replace the point's tangent Av[p] (a symmetric d²×d² matrix over (i a), (k b)) by its
+    positive semi-definite part Σ max(λ, 0) v vᵀ (projected Newton, Teran et al. 2005).
+
+    Under compression the rotational modes of a point's tangent are negative
+    (∝ (P₁ + P₂)/(λ₁ + λ₂) in 2D); in MPM no element stiffness offsets them, and at large
+    Δt the mass term cannot either: the Newton matrix turns indefinite.
+    """
+    d = Av.shape[1]
+    n = d * d
+    for i in range(d):
+        for a in range(d):
+            for k in range(d):
+                for b in range(d):
+                    M[i * d + a, k * d + b] = Av[p, i, a, k, b]
+    for r in range(n):
+        for c in range(r + 1, n):
+            mean = 0.5 * (M[r, c] + M[c, r])
+            M[r, c] = mean
+            M[c, r] = mean
+    w, V = np.linalg.eigh(M)
+    if w[0] >= 0.0:
+        return
+    for i in range(d):
+        for a in range(d):
+            for k in range(d):
+                for b in range(d):
+                    acc = 0.0
+                    for e in range(n):
+                        if w[e] > 0.0:
+                            acc += w[e] * V[i * d + a, e] * V[k * d + b, e]
+                    Av[p, i, a, k, b] = acc
+
+
 @njit(cache=True, parallel=True)
-def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangent, n_chunks):
-    """Per point: Pv = V^n P̃ (d×d) and, if ``want_tangent``, Av = V^n Ã (d×d×d×d).
+def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangent, n_chunks,
+                   project=False):
+    """Per point: Pv = V^n P̃ (d×d) and, if ``want_tangent``, Av = V^n Ã (d×d×d×d), made
+    positive semi-definite per point when ``project`` (:func:`project_to_psd`).
 
     Points are processed in ``n_chunks`` chunks (a few per thread), each with its own
     scratch arrays (no allocation per point). Returns (smallest J of the trial state, strain
@@ -124,6 +161,7 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
         Finv = np.empty((d, d))
         Fn = np.empty((d, d))
         A = np.empty((d, d, d, d))
+        psd = np.empty((d * d, d * d))
         jmin = np.inf
         energy = 0.0
         for p in range(c * n // n_chunks, (c + 1) * n // n_chunks):
@@ -157,6 +195,8 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
                                 for N_ in range(d):
                                     acc += A[i, M, k, N_] * Fn[a, M] * Fn[b, N_]
                             Av[p, i, a, k, b] = scale * acc
+            if project:
+                project_to_psd(Av, p, psd)
         Jmin_chunk[c] = jmin
         W_chunk[c] = energy
     return Jmin_chunk.min(), W_chunk.sum()

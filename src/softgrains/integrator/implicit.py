@@ -72,6 +72,7 @@ class IntegratorSettings:
     tolerance: float = 1e-8
     max_iterations: int = 25
     linear_solver: str = "auto"
+    tangent: str = "projected"  # "projected" (PSD per point) | "exact"
 
 
 @dataclass(frozen=True)
@@ -288,7 +289,8 @@ class BodyStep:
         pts = self.pts
         jmin, w_int = point_stresses(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n,
                                      pts.law, pts.lam, pts.mu, self.Pv, self.Av, want_tangent,
-                                     self.n_chunks)
+                                     self.n_chunks,
+                                     self.settings.tangent == "projected")
         if jmin > 0.0:
             gather_forces(self.ptr, self.entries, self.dN, self.Pv, self.f_int)
             if want_tangent:
@@ -332,16 +334,23 @@ class BodyStep:
         seen by the Gauss–Seidel sweep stay consistent with u.
 
         ``response`` (from :meth:`contact_response`) is A⁻¹ at the rows' dofs; without it the
-        lumped relation moves only the rows: Δu = w Q/(c_m m). Call :meth:`refresh` before
-        the next Newton update.
+        lumped relation moves only the rows: Δu = w Q/(c_m m). The residual is refreshed; a
+        move that would invert a point is not made (the impulses still enter b).
         """
         w = self.impulse_weight
         self.b[rows] += w * Q
+        u_before = self.u.copy()
         if response is None:
             self.u[rows] += w * Q / (self.c_m * self.m[rows])
         else:
             self.u += (response @ Q.ravel()).reshape(self.u.shape)
         self.u[self.fixed] = self.dt * self.vbar[self.fixed]
+        self.refresh()
+        if self.jmin <= 0.0 or not np.isfinite(self.rnorm):
+            # the linear response would invert a point: keep u, the impulses stay in b and
+            # the next Newton update (with its line search) takes them in
+            self.u = u_before
+            self.refresh()
 
     def contact_response(self, rows: np.ndarray, delassus: bool
                          ) -> tuple[np.ndarray | None, np.ndarray]:

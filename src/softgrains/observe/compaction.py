@@ -1,0 +1,84 @@
+"""Observables of a sample compressed in a box (ALGORITHM.md §9).
+
+With the inner box W × g (g: gap between the inner faces of the bottom and top walls),
+A_box = W g, and the contact forces f_b each wall received over the step (compression
+positive):
+    φ = Σ_grains Σ_p V_p / A_box
+    σ_yy = f_top,y / W,      σ_xx = (f_right,x − f_left,x) / (2 g)
+    σ^avg = −(1/A_box) Σ_grains Σ_p V_p σ_p        (Cauchy stress, tension positive)
+Coordination over body pairs with at least one contact node with P_n > 0:
+    Z = 2 N_gg / N_g,   Z_w = (2 N_gg + N_gw) / N_g,
+rattlers: grains with fewer than 2 force-bearing contacts (grain or wall); Z* = 2 N_gg* / N_g*
+over the other grains and the pairs between them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+COMPACTION_COLUMNS = [
+    "phase", "phi", "stress_yy", "stress_xx", "stress_yy_avg", "stress_xx_avg",
+    "stress_mean_avg", "wall_gap", "coordination", "coordination_walls",
+    "coordination_no_rattlers", "rattler_fraction", "top_wall_velocity",
+]
+
+
+def wall_gap(model, state, walls: dict[str, int]) -> float:
+    """Gap between the inner faces of the bottom and top walls (their current positions)."""
+    bottom, top = model.bodies[walls["wall_bottom"]], model.bodies[walls["wall_top"]]
+    y_bottom = bottom.shape.upper[1] + state.body_offset[bottom.index, 1]
+    y_top = top.shape.lower[1] + state.body_offset[top.index, 1]
+    return float(y_top - y_bottom)
+
+
+def box_stresses(model, state, walls: dict[str, int], grains: np.ndarray, width: float,
+                 forces: np.ndarray) -> dict[str, float]:
+    """φ, wall stresses and volume-averaged stress; ``grains``: their point indices."""
+    gap = wall_gap(model, state, walls)
+    area = width * gap
+    vol = state.vol[grains]
+    mean_sigma = -(vol[:, None, None] * state.sigma[grains]).sum(axis=0) / area
+    f_top = forces[walls["wall_top"]]
+    f_left, f_right = forces[walls["wall_left"]], forces[walls["wall_right"]]
+    return {
+        "phi": float(vol.sum() / area),
+        "stress_yy": float(f_top[1] / width),
+        "stress_xx": float((f_right[0] - f_left[0]) / (2.0 * gap)),
+        "stress_yy_avg": float(mean_sigma[1, 1]),
+        "stress_xx_avg": float(mean_sigma[0, 0]),
+        "stress_mean_avg": float(0.5 * (mean_sigma[0, 0] + mean_sigma[1, 1])),
+        "wall_gap": gap,
+    }
+
+
+def coordination(contacts, is_grain: np.ndarray) -> dict[str, float]:
+    """Z, Z_w, Z* and the rattler fraction from a step's ContactState."""
+    return coordination_and_rattlers(contacts, is_grain)[0]
+
+
+def coordination_and_rattlers(contacts, is_grain: np.ndarray) -> tuple[dict, np.ndarray]:
+    """:func:`coordination` and the rattler mask over bodies."""
+    n_grains = int(is_grain.sum())
+    empty = {"coordination": 0.0, "coordination_walls": 0.0,
+             "coordination_no_rattlers": 0.0, "rattler_fraction": 1.0 if n_grains else 0.0}
+    if contacts is None or len(contacts.nodes) == 0 or n_grains == 0:
+        return empty, is_grain.copy()
+    pn = np.einsum("ij,ij->i", contacts.impulse, contacts.nodes.normal)
+    bearing = pn > 0.0
+    pairs = {(int(a), int(b)) for a, b in zip(contacts.nodes.alpha[bearing],
+                                               contacts.nodes.beta[bearing], strict=True)}
+    gg = [(a, b) for a, b in pairs if is_grain[a] and is_grain[b]]
+    gw = [(a, b) for a, b in pairs if is_grain[a] != is_grain[b]]
+    count = np.zeros(is_grain.size, np.int64)
+    for a, b in pairs:
+        count[a] += 1
+        count[b] += 1
+    rattler = is_grain & (count < 2)
+    kept = n_grains - int(rattler.sum())
+    gg_kept = sum(1 for a, b in gg if not rattler[a] and not rattler[b])
+    return {
+        "coordination": 2.0 * len(gg) / n_grains,
+        "coordination_walls": (2.0 * len(gg) + len(gw)) / n_grains,
+        "coordination_no_rattlers": 2.0 * gg_kept / kept if kept else 0.0,
+        "rattler_fraction": float(rattler.sum()) / n_grains,
+    }, rattler
