@@ -22,10 +22,12 @@ def _cli(*args):
 @pytest.mark.parametrize("case", EXAMPLES, ids=[p.stem for p in EXAMPLES])
 def test_example_runs_and_writes_every_output(case, tmp_path):
     assert _cli("check", str(case)).returncode == 0
-    dt = tomllib.loads(case.read_text())["simulation"]["dt"]
+    data = tomllib.loads(case.read_text())
+    dt = data["simulation"]["dt"]
     out = tmp_path / "run"
+    extra = ["--set", f"protocol.precompaction_dt={dt!r}"] if "protocol" in data else []
     res = _cli("run", str(case), "--out", str(out), "--set", f"simulation.end_time={3 * dt!r}",
-               "--set", "output.interval=1", "--set", "output.snapshot_interval=2")
+               "--set", "output.interval=1", "--set", "output.snapshot_interval=2", *extra)
     assert res.returncode == 0, res.stderr
     assert "Traceback" not in res.stderr
     series = read_table(out / "series.csv")

@@ -47,14 +47,21 @@ def _parser() -> argparse.ArgumentParser:
     )
     commands = parser.add_subparsers(title="commands", required=True, metavar="COMMAND")
 
-    run = commands.add_parser("run", help="run a case")
-    run.add_argument("case", type=Path, metavar="CASE.toml", help="the case file")
+    run = commands.add_parser(
+        "run", help="run one case, or several in parallel processes (then compared)")
+    run.add_argument("cases", type=Path, nargs="+", metavar="CASE.toml", help="case file(s)")
     run.add_argument(
         "--out",
         type=Path,
         metavar="DIR",
-        help="output directory (default: results/<case file name without .toml>)",
+        help="output directory (default: results/<case file name without .toml>); with "
+        "several cases, each runs into DIR/<case name> and the comparison figures go to "
+        "DIR/figures (default DIR: results/comparison)",
     )
+    run.add_argument("--jobs", type=int, default=0, metavar="N",
+                     help="cases run at once (default: as many as cores, at most the cases)")
+    run.add_argument("--no-figures", dest="figures", action="store_false",
+                     help="do not draw the figures at the end")
     run.add_argument(
         "--resume",
         action="store_true",
@@ -76,8 +83,13 @@ def _parser() -> argparse.ArgumentParser:
             help="override a case key, e.g. --set simulation.dt=1e-4 (repeatable)",
         )
 
-    plot = commands.add_parser("plot", help="(re)draw the figures of a run")
-    plot.add_argument("directory", type=Path, metavar="DIR", help="the run's output directory")
+    plot = commands.add_parser(
+        "plot", help="(re)draw the figures of a run, or compare several compaction runs")
+    plot.add_argument("directories", type=Path, nargs="+", metavar="DIR",
+                      help="run output directories")
+    plot.add_argument("--out", type=Path, metavar="FIGDIR",
+                      help="where the comparison figures go (default: DIR/figures for one "
+                      "run, the first run's parent/figures for several)")
     plot.set_defaults(command=_plot)
 
     info = commands.add_parser("info", help="show versions, threads and devices")
@@ -86,12 +98,32 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _run(args: argparse.Namespace) -> int:
-    """``softgrains run``: load the case and run it into the output directory."""
+    """``softgrains run``: load the case(s) (all validated first) and run them."""
     if args.resume:
         _error("resume is not implemented yet")
         return EXIT_INVALID
-    case = load_case(args.case, overrides=args.overrides)
-    out = args.out if args.out is not None else Path("results") / args.case.stem
+    cases = [load_case(path, overrides=args.overrides) for path in args.cases]
+    if len(cases) == 1:
+        out = args.out if args.out is not None else Path("results") / args.cases[0].stem
+        status = _run_one(cases[0], out)
+        if status == EXIT_OK and args.figures:
+            _draw([out], None)
+        return status
+    root = args.out if args.out is not None else Path("results") / "comparison"
+    stems = [path.stem for path in args.cases]
+    if len(set(stems)) != len(stems):
+        raise CaseError(f"several cases have the same file name ({stems}): each runs into "
+                        "DIR/<file name>; rename them")
+    outs = [root / stem for stem in stems]
+    jobs = args.jobs or min(len(cases), os.cpu_count() or 1)
+    statuses = _run_parallel(args.cases, args.overrides, outs, max(1, jobs))
+    done = [out for out, status in zip(outs, statuses, strict=True) if status == EXIT_OK]
+    if done and args.figures:
+        _draw(done, root / "figures")
+    return max(statuses)
+
+
+def _run_one(case, out: Path) -> int:
     from softgrains.simulation import Simulation  # heavy: numba kernels
 
     try:
@@ -103,6 +135,54 @@ def _run(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
+                  jobs: int) -> list[int]:
+    """Run the cases in ``jobs`` processes, the cores shared among them (no progress bars:
+    each run writes its run.log; one line per case here when it ends)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    threads = max(1, (os.cpu_count() or 1) // min(jobs, len(paths)))
+    print(f"running {len(paths)} cases, {min(jobs, len(paths))} at once, {threads} "
+          f"thread(s) each; logs in {', '.join(str(o / 'run.log') for o in outs)}")
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        futures = [pool.submit(_child_run, str(p), list(overrides), str(o), threads)
+                   for p, o in zip(paths, outs, strict=True)]
+        statuses = []
+        for path, out, future in zip(paths, outs, futures, strict=True):
+            status, message = future.result()
+            print(f"{path}: {'done' if status == EXIT_OK else 'FAILED'} -> {out}"
+                  + (f"\n  {message}" if message else ""))
+            statuses.append(status)
+    return statuses
+
+
+def _child_run(path: str, overrides: list[str], out: str, threads: int) -> tuple[int, str]:
+    """One case in a worker process: (exit status, error message)."""
+    import numba
+
+    from softgrains.simulation import Simulation
+
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+    case = load_case(path, overrides=[*overrides, "output.progress=false"])
+    if case.simulation.threads == 0:
+        case.simulation.threads = threads
+    try:
+        Simulation(case, out=out).run()
+    except SimulationError as error:
+        return EXIT_FAILED, str(error)
+    return EXIT_OK, ""
+
+
+def _draw(run_dirs: list[Path], out: Path | None) -> None:
+    from softgrains.viz import draw_figures  # heavy: matplotlib
+
+    written = draw_figures(run_dirs, out)
+    folders = sorted({str(path.parent) for path in written})
+    print(f"{len(written)} figures in {', '.join(folders)}")
+
+
 def _check(args: argparse.Namespace) -> int:
     """``softgrains check``: validate the case and print its summary."""
     case = load_case(args.case, overrides=args.overrides)
@@ -112,12 +192,16 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _plot(args: argparse.Namespace) -> int:
-    """``softgrains plot``: draw the figures of a run directory and list them."""
-    if not args.directory.is_dir():
-        raise CaseError(f"no such run directory: '{args.directory}'")
-    from softgrains.viz.series import plot_run  # heavy: matplotlib
+    """``softgrains plot``: draw the figures of run directories and list them."""
+    for directory in args.directories:
+        if not directory.is_dir():
+            raise CaseError(f"no such run directory: '{directory}'")
+    from softgrains.viz import draw_figures  # heavy: matplotlib
 
-    for path in plot_run(args.directory):
+    out = args.out
+    if out is None and len(args.directories) > 1:
+        out = args.directories[0].parent / "figures"
+    for path in draw_figures(args.directories, out):
         print(path)
     return EXIT_OK
 

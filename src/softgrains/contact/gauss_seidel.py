@@ -7,7 +7,9 @@ impulse at one of them (lumped: diag(1/m); Delassus: κ w [A⁻¹]_cc). At conta
 
     ΔV_α = W_α[:, i] ΔP,   ΔV_β = −W_β[:, j] ΔP,   Δw = (W_α[i, i] + W_β[j, j]) ΔP = W_c ΔP.
 
-Each visit applies the closed-form local solution (local_law.py) with the scalar masses
+In 2D each visit solves the local problem exactly with the full 2×2 block W_c
+(local_impulse_2d: open, stick or slip±, on w^free = w − W_c P). Otherwise (3D, or no
+branch consistent) it applies the closed-form local solution (local_law.py) with the scalar masses
 m_n = 1/(n·W_c n) and m_t = (d − 1)/(tr W_c − n·W_c n), on w^free = w − P_n/m_n n − P_t/m_t:
 the own impulse is removed with the same scalar compliances, so that a fixed point of the
 sweeps satisfies Signorini and Coulomb exactly (removing it with the full W_c would leave
@@ -18,7 +20,7 @@ changes are summed per body row in Q, to be passed on to the bodies' iterates af
 import numpy as np
 from numba import njit
 
-from softgrains.contact.local_law import OPEN, local_impulse
+from softgrains.contact.local_law import OPEN, SLIP, STICK, local_impulse
 
 
 @njit(cache=True, inline="always")
@@ -38,6 +40,49 @@ def _spread(W, base, kd, k, col, d, sign, dP, V, v_off):
             for q in range(d):
                 acc += W[base + (r * d + p) * kd + col * d + q] * dP[q]
             V[v_off + r, p] += sign * acc
+
+
+@njit(cache=True, inline="always")
+def local_impulse_2d(w_free, n, Wc, gap_over_dt, mu, P):
+    """Exact 2D local solution with the full 2×2 compliance: w = w^free + W_c P.
+
+    Tries, in order, open (P = 0), stick (W_c P = −w^free − (g/Δt) n) and slip with
+    P = P_n (n + s μ t), s = ±1, keeping the first that satisfies its conditions; returns
+    its status, or −1 when none does (then the caller uses the scalar-mass solution).
+    """
+    t0, t1 = -n[1], n[0]
+    wn = w_free[0] * n[0] + w_free[1] * n[1] + gap_over_dt
+    if wn >= 0.0:
+        P[0] = 0.0
+        P[1] = 0.0
+        return OPEN
+    det = Wc[0, 0] * Wc[1, 1] - Wc[0, 1] * Wc[1, 0]
+    if det > 0.0:
+        r0 = -w_free[0] - gap_over_dt * n[0]
+        r1 = -w_free[1] - gap_over_dt * n[1]
+        p0 = (Wc[1, 1] * r0 - Wc[0, 1] * r1) / det
+        p1 = (Wc[0, 0] * r1 - Wc[1, 0] * r0) / det
+        pn = p0 * n[0] + p1 * n[1]
+        pt = p0 * t0 + p1 * t1
+        if pn >= 0.0 and abs(pt) <= mu * pn:
+            P[0] = p0
+            P[1] = p1
+            return STICK
+    for s in (1.0, -1.0):
+        e0 = n[0] + s * mu * t0
+        e1 = n[1] + s * mu * t1
+        We0 = Wc[0, 0] * e0 + Wc[0, 1] * e1
+        We1 = Wc[1, 0] * e0 + Wc[1, 1] * e1
+        denominator = n[0] * We0 + n[1] * We1
+        if denominator <= 0.0:
+            continue
+        pn = -wn / denominator
+        wt = (w_free[0] + pn * We0) * t0 + (w_free[1] + pn * We1) * t1
+        if pn >= 0.0 and s * wt <= 0.0:
+            P[0] = pn * e0
+            P[1] = pn * e1
+            return SLIP
+    return -1
 
 
 @njit(cache=True)
@@ -84,8 +129,24 @@ def gauss_seidel(a_slot, a_col, b_slot, b_col, wall_va, wall_vb, normal, gap_ove
                 # so that a fixed point satisfies Signorini–Coulomb exactly
                 w_free[p] = (va - vb - wnn * pn * normal[c, p]
                              - (wtt if m_t > 0.0 else 0.0) * (P[c, p] - pn * normal[c, p]))
-            status[c] = local_impulse(w_free, normal[c], 1.0 / wnn, m_t, gap_over_dt[c],
+            state = -1
+            if d == 2:
+                for p in range(d):  # the own impulse removed with the full W_c
+                    w_free[p] += wnn * pn * normal[c, p] + (
+                        (wtt if m_t > 0.0 else 0.0) * (P[c, p] - pn * normal[c, p]))
+                    for q in range(d):
+                        w_free[p] -= Wc[p, q] * P[c, q]
+                state = local_impulse_2d(w_free, normal[c], Wc, gap_over_dt[c], mu[c], P_new)
+                if state < 0:  # back to the scalar-mass form
+                    for p in range(d):
+                        for q in range(d):
+                            w_free[p] += Wc[p, q] * P[c, q]
+                        w_free[p] -= wnn * pn * normal[c, p] + (
+                            (wtt if m_t > 0.0 else 0.0) * (P[c, p] - pn * normal[c, p]))
+            if state < 0:
+                state = local_impulse(w_free, normal[c], 1.0 / wnn, m_t, gap_over_dt[c],
                                       mu[c], P_new)
+            status[c] = state
             moved = 0.0
             for p in range(d):
                 dP[p] = P_new[p] - P[c, p]
