@@ -29,6 +29,7 @@ from softgrains.io import (
 from softgrains.model import build
 from softgrains.observe.bodies import body_columns, body_records
 from softgrains.observe.compaction import COMPACTION_COLUMNS
+from softgrains.observe.contacts import CONTACT_COLUMNS, contact_records, contact_rows
 from softgrains.observe.energies import kinetic_energy, strain_energy
 from softgrains.observe.stress import von_mises
 from softgrains.protocol import UniaxialCompaction
@@ -173,6 +174,7 @@ class Simulation:
             if cfg.snapshot_interval > 0:
                 (out / "snapshots").mkdir(exist_ok=True)
                 pvd = PvdSeries(out / "snapshots" / "points.pvd")
+                contacts_pvd = PvdSeries(out / "snapshots" / "contacts.pvd")
         progress = Progress(self.n_steps, enabled=cfg.progress)
         if out is not None:
             log = open_run_log(out, verbose_console=not progress.active)
@@ -192,9 +194,22 @@ class Simulation:
             return row
 
         def snapshot():
-            name = f"points_{self.state.step:08d}.vtu"
+            step = self.state.step
+            name = f"points_{step:08d}.vtu"
             write_points_vtu(out / "snapshots" / name, self.state.x, self.snapshot_data())
             pvd.add(self.state.time, name)
+            # contact forces: a point set of the contact nodes beside the material points,
+            # and the per-contact table of INTERFACE.md
+            records = contact_records(self.model, self.last_diagnostics.contacts,
+                                      self.last_dt)
+            name = f"contacts_{step:08d}.vtu"
+            write_points_vtu(out / "snapshots" / name, records["position"],
+                             {k: v for k, v in records.items() if k != "position"})
+            contacts_pvd.add(self.state.time, name)
+            table = CsvTable(out / "contacts" / f"contacts_{step:08d}.csv", CONTACT_COLUMNS)
+            for row in contact_rows(self.model, self.state, records):
+                table.append(row)
+            table.close()
 
         t0 = _time.perf_counter()
         self._t_after_first_step = None

@@ -94,8 +94,9 @@ def test_block_on_an_incline_slides_with_the_coulomb_acceleration(mu, expected, 
     tilted by 30°: a = g(sin θ − μ cos θ) from a quadratic fit of the centre-of-mass
     displacement after 0.15 s. Measured (2026-11-23): 3.2059 (μ = 0.2), 0.6577 (μ = 0.5),
     −0.002 m/s² (μ = 0.7: sticks), the same with either local relation (the Delassus one
-    in 2 coupling iterations a step, the lumped one in 10–24 when sticking). The exact face normal of the wall is what makes this
-    right: mass-gradient normals gave 2.28 m/s² at μ = 0.2 and stuck at μ = 0.5."""
+    in 2 coupling iterations a step, the lumped one in 10–24 when sticking). The exact face
+    normal of the wall is what makes this right: mass-gradient normals gave 2.28 m/s² at
+    μ = 0.2 and stuck at μ = 0.5."""
     g, tilt = 9.81, np.radians(30.0)
     sim = _block_on_slab(young=1e6, dt=0.005, steps=80, slab_length=3.6,
                          gravity=(g * np.sin(tilt), -g * np.cos(tilt)),

@@ -9,12 +9,12 @@ impulse at one of them (lumped: diag(1/m); Delassus: κ w [A⁻¹]_cc). At conta
 
 In 2D each visit solves the local problem exactly with the full 2×2 block W_c
 (local_impulse_2d: open, stick or slip±, on w^free = w − W_c P). Otherwise (3D, or no
-branch consistent) it applies the closed-form local solution (local_law.py) with the scalar masses
-m_n = 1/(n·W_c n) and m_t = (d − 1)/(tr W_c − n·W_c n), on w^free = w − P_n/m_n n − P_t/m_t:
-the own impulse is removed with the same scalar compliances, so that a fixed point of the
-sweeps satisfies Signorini and Coulomb exactly (removing it with the full W_c would leave
-w_t = W_tn P_n at a "sticking" fixed point). The n–t coupling of W_c still moves V. Kinematic walls (slot −1) have W = 0 and a prescribed velocity. The impulse
-changes are summed per body row in Q, to be passed on to the bodies' iterates afterwards.
+branch consistent) it applies the closed-form law of local_law.py with the scalar masses
+m_n = 1/(n·W_c n), m_t = (d − 1)/(tr W_c − n·W_c n) on w^free = w − P_n/m_n n − P_t/m_t:
+the own impulse removed with the same scalar compliances, so that a fixed point satisfies
+Signorini and Coulomb exactly (removing it with the full W_c leaves w_t = W_tn P_n at a
+"sticking" fixed point). Kinematic walls (slot −1) have W = 0 and a prescribed velocity.
+The impulse changes are summed per body row in Q, passed on to the bodies afterwards.
 """
 
 import numpy as np

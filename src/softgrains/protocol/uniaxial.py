@@ -3,15 +3,16 @@ constant speed.
 
 Pre-compaction (steps of precompaction_dt: only its end state matters, and θ = 1 with large
 steps damps the grains' vibrations): the top wall approaches at the largest speed v_max until
-the running average of σ_yy (SMOOTHING) first reaches σ0/2, then is stress-controlled by a proportional law
-    v = −v_max clip(G (σ0 − σ̄)/σ0, −1, 1),   G = SERVO_GAIN, σ̄ the running average.
+the running average σ̄ of σ_yy (weight SMOOTHING) first reaches σ0/2; then a proportional
+law controls the stress:
+    v = −v_max clip(G (σ0 − σ̄)/σ0, −1, 1),   G = SERVO_GAIN.
 The loop gain K v_max Δt G/σ0 (K = dσ/dy of the packing, ~1e8 Pa/m for 30 disks of 1 cm
 at 5 kPa) must stay below 1: a secant estimate of K made the wall oscillate (σ between 0
 and 4 σ0), measured 2026-11-23.
-Equilibrium when |σ − σ0| ≤ tol σ0 and the kinetic energy of the grains that are not rattlers
-≤ ratio × strain energy;
-then h0 (wall gap) and φ0 are recorded and the compaction starts: v = −wall_speed until
-σ_yy ≥ stop_stress_ratio σ0 or φ ≥ stop_packing_fraction.
+Equilibrium when |σ − σ0| ≤ tol σ0 and the kinetic energy of the grains that are not
+rattlers ≤ ratio × strain energy; then h0 (wall gap) and φ0 are recorded and the
+compaction starts: v = −wall_speed until σ_yy ≥ stop_stress_ratio σ0 or φ ≥
+stop_packing_fraction.
 """
 
 from __future__ import annotations
@@ -77,7 +78,6 @@ class UniaxialCompaction:
         s = self.settings
         phase = self.phase
         obs = self.observe(state, forces, contacts)
-        top = self.walls["wall_top"]
         self._sigma = obs["stress_yy"]
         self._smooth += SMOOTHING * (self._sigma - self._smooth)
         if phase == PRECOMPACTION:
