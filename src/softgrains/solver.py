@@ -64,9 +64,9 @@ class Solver:
             for b in model.bodies if b.deformable
         }
         c = model.contact
-        self.coupling = CouplingSettings(
+        self.coupling = CouplingSettings() if c is None else CouplingSettings(
             relation=c.local_relation, tolerance=c.tolerance, max_iterations=c.max_iterations,
-            gap=c.gap, on_failure=c.on_failure) if c is not None else CouplingSettings()
+            gap=c.gap, on_failure=c.on_failure, normal=c.normal)
 
     def body_points(self, state: State, index: int) -> BodyPoints:
         m, sl = self.model, self.model.bodies[index].points

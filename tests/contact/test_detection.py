@@ -17,13 +17,15 @@ def _field(index, shape, kind=0):
     return nodal_field(index, body_stencils(LAT, kind, x), np.full(len(x), 1000.0 * v0)), x
 
 
+@pytest.mark.parametrize("normal", ["difference", "alpha", "beta"])
 @pytest.mark.parametrize("kind", [0, 1], ids=["linear", "bspline2"])
-def test_normals_of_two_half_planes_point_from_beta_into_alpha(kind):
+def test_normals_of_two_half_planes_point_from_beta_into_alpha(kind, normal):
     """Two blocks a quarter cell apart: every contact normal satisfies
-    n·(centroid_α − centroid_β) > 0, and away from the corners n = (−1, 0)."""
+    n·(centroid_α − centroid_β) > 0, and away from the corners n = (−1, 0), whichever
+    gradient(s) the normal comes from."""
     fa, xa = _field(0, Rectangle(np.array([0.5, 0.5]), np.array([1.5, 2.5])), kind)
     fb, xb = _field(1, Rectangle(np.array([1.525, 0.5]), np.array([2.5, 2.5])), kind)
-    contacts = find_contact_nodes(LAT, [fa, fb])
+    contacts = find_contact_nodes(LAT, [fa, fb], normal_kind=normal)
     assert len(contacts) > 0
     assert np.all(contacts.alpha == 0) and np.all(contacts.beta == 1)
     towards_alpha = xa.mean(axis=0) - xb.mean(axis=0)

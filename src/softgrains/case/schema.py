@@ -278,6 +278,9 @@ class ContactSettings(_Section):
     pairs: list[FrictionPair] = Field(default_factory=list,
                                       description="friction of named body pairs")
     gap: bool = Field(True, description="act only when the boundaries meet (ALGORITHM.md §4)")
+    normal: Literal["difference", "alpha", "beta"] = Field(
+        "difference", description="contact normal from the mass gradients of both bodies, "
+        "or of α or β alone (exact face normals against kinematic rectangles and disks)")
     local_relation: Literal["delassus", "lumped"] = Field(
         "delassus", description="local compliance: Delassus (bodies' Newton matrices) or "
         "lumped nodal masses")
@@ -320,6 +323,9 @@ class ProtocolSettings(_Section):
         0.01, gt=0, lt=1, description="equilibrium: |σ − σ0| ≤ tolerance σ0")
     kinetic_ratio: float = Field(
         1e-3, gt=0, lt=1, description="equilibrium: kinetic ≤ ratio × strain energy")
+    compaction_dt_ramp: float = Field(
+        1.0, ge=1.0, le=1e4, description="the compaction starts with steps of dt/ramp, "
+        "growing 10% a step up to dt")
     precompaction_max_steps: int | None = Field(
         None, ge=1, description="start the compaction after this many pre-compaction steps "
         "even out of equilibrium (logged)")

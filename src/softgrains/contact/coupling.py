@@ -45,6 +45,7 @@ class CouplingSettings:
     max_iterations: int = 2000
     gap: bool = True
     on_failure: str = "stop"
+    normal: str = "difference"
 
 
 @dataclass
@@ -123,7 +124,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     ``gap_points`` (body index → start-of-step point positions) the boundary gap of gap.py
     is used. ``warm``: the previous step's contacts (warm start).
     """
-    contacts = find_contact_nodes(lattice, fields, {b: s for b, (_, s) in walls.items()})
+    contacts = find_contact_nodes(lattice, fields, {b: s for b, (_, s) in walls.items()},
+                                  settings.normal)
     # a node below a body's activity threshold carries no unknown there: no contact; two
     # kinematic bodies do not interact
     usable = np.array([int(a) in steps or int(b) in steps
@@ -241,4 +243,5 @@ def _pass_on(steps: dict, slots: _Slots, Q: np.ndarray, move: bool) -> None:
             s.apply_impulses(slots.rows[slot], q, slots.response[slot])
         else:
             s.b[slots.rows[slot]] += s.impulse_weight * q
+            s.contact_impulse[slots.rows[slot]] += q
             s.refresh()

@@ -5,7 +5,8 @@ Every body b has, on its node box of the common lattice,
 A contact node is a lattice node where two bodies α < β both carry mass above a threshold
 (a fraction of the body's heaviest point); one contact per body pair at a node, so three
 bodies at a node give three contacts. The unit normal points from β into α:
-    n = (g^β − g^α) / ‖g^β − g^α‖.
+    n = (g^β − g^α) / ‖g^β − g^α‖         ("difference", the default),
+or from one body's gradient alone: n = −g^α/‖g^α‖ ("alpha") or g^β/‖g^β‖ ("beta").
 """
 
 from __future__ import annotations
@@ -115,8 +116,12 @@ def wall_face_normal(shape, x: np.ndarray) -> np.ndarray | None:
     return None
 
 
+NORMALS = ("difference", "alpha", "beta")
+
+
 def find_contact_nodes(lattice: Lattice, fields: list[NodalField],
-                       walls: dict | None = None) -> ContactNodes:
+                       walls: dict | None = None, normal_kind: str = "difference"
+                       ) -> ContactNodes:
     """All (node, α, β) with both bodies' mass above their thresholds, and their normals.
 
     ``walls`` maps the body index of a rigid (kinematic) body to its Shape: against a wall the
@@ -150,7 +155,12 @@ def find_contact_nodes(lattice: Lattice, fields: list[NodalField],
     ka, kb = bodies[a], bodies[b]
     g_a = np.array([fields[k].gradient[i] for k, i in zip(ka, locals_[a], strict=True)])
     g_b = np.array([fields[k].gradient[i] for k, i in zip(kb, locals_[b], strict=True)])
-    diff = g_b - g_a
+    if normal_kind == "alpha":  # α's own outward gradient, reversed
+        diff = -g_a
+    elif normal_kind == "beta":  # β's own outward gradient
+        diff = g_b
+    else:
+        diff = g_b - g_a
     length = np.linalg.norm(diff, axis=1)
     # no normal where the two gradients cancel (e.g. deep overlap): no contact there
     scale = np.maximum(np.linalg.norm(g_a, axis=1), np.linalg.norm(g_b, axis=1))

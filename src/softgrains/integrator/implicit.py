@@ -275,6 +275,7 @@ class BodyStep:
         self.rnorm = self.r0 = float(np.linalg.norm(self.r))
         self.pi = self.potential(u, w_int)
         self._A = self._lu = self._v_affine = None  # Newton matrix, its LU, v(u) map
+        self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
 
     # -- the step equations ------------------------------------------------------------
     def mass_times(self, u: np.ndarray) -> np.ndarray:
@@ -339,6 +340,7 @@ class BodyStep:
         """
         w = self.impulse_weight
         self.b[rows] += w * Q
+        self.contact_impulse[rows] += Q
         u_before = self.u.copy()
         if response is None:
             self.u[rows] += w * Q / (self.c_m * self.m[rows])
@@ -475,7 +477,10 @@ class BodyStep:
             if self.newmark:
                 a1 = self.c_m * (u - dt * v_n) - (0.5 / st.beta - 1.0) * a_n
                 v1 = v_n + dt * ((1.0 - st.gamma) * a_n + st.gamma * a1)
-                a_new[active] = a1
+                # the contact impulse changes the velocity (P/m) but is not kept in the stored
+                # acceleration: there it would replay the impact in the next step (a node
+                # striking a wall rebounded at 0.8 of its speed; ALGORITHM.md §3, §5)
+                a_new[active] = a1 - self.contact_impulse / (st.gamma * dt * self.m)
             else:
                 v1 = (u / dt - (1.0 - st.theta) * v_n) / st.theta
             v_old[active] = self.v_free  # so that fixed nodes pass their velocity on

@@ -11,7 +11,8 @@ at 5 kPa) must stay below 1: a secant estimate of K made the wall oscillate (σ 
 and 4 σ0), measured 2026-11-23.
 Equilibrium when |σ − σ0| ≤ tol σ0 and the kinetic energy of the grains that are not
 rattlers ≤ ratio × strain energy; then h0 (wall gap) and φ0 are recorded and the
-compaction starts: v = −wall_speed until σ_yy ≥ stop_stress_ratio σ0 or φ ≥
+compaction starts: v = −wall_speed (steps from dt/compaction_dt_ramp growing by RAMP_GROWTH
+to dt) until σ_yy ≥ stop_stress_ratio σ0 or φ ≥
 stop_packing_fraction.
 """
 
@@ -24,6 +25,7 @@ from softgrains.sample import WALLS
 
 PRECOMPACTION, COMPACTION = "precompaction", "compaction"
 SERVO_GAIN = 0.25
+RAMP_GROWTH = 1.1  # growth of the compaction time step per step, from dt/compaction_dt_ramp
 SMOOTHING = 0.3  # weight of the newest σ_yy in the running average that drives the control
 
 
@@ -47,14 +49,17 @@ class UniaxialCompaction:
         self._engaged = False  # the stress control has taken over from the approach
         self._smooth = 0.0  # σ_yy averaged over the last steps (impacts make it jump)
         self._pre_steps = 0
+        self._comp_steps = 0
 
     # -- control -------------------------------------------------------------------------
     def time_step(self) -> float:
         """Δt of the coming step: pre-compaction may take larger steps (quasi-static)."""
         s = self.settings
-        if self.phase == PRECOMPACTION and s.precompaction_dt is not None:
-            return s.precompaction_dt
-        return self.dt
+        if self.phase == PRECOMPACTION:
+            return s.precompaction_dt if s.precompaction_dt is not None else self.dt
+        # the first steps of the compaction are smaller: dt/ramp growing 10% a step, so that
+        # the first regime (σ0 to ~30 σ0 within ~2% strain) is resolved
+        return min(self.dt, self.dt / s.compaction_dt_ramp * RAMP_GROWTH ** self._comp_steps)
 
     def before_step(self, state) -> None:
         """Set the top wall's velocity for the coming step."""
@@ -100,15 +105,17 @@ class UniaxialCompaction:
                     f"pre-compaction done ({how}) at t = {state.time:.6g} s: σ_yy = "
                     f"{self._sigma:.4g} Pa, h0 = {self.h0:.6g} m, φ0 = {self.phi0:.4f}; "
                     f"compaction at {s.wall_speed:g} m/s")
-        elif s.stop_stress_ratio is not None and self._sigma >= s.stop_stress_ratio * s.sigma0:
-            self.finished = True
-            self.stop_reason = f"σ_yy/σ0 = {self._sigma / s.sigma0:.4g} reached"
-        elif s.stop_packing_fraction is not None and obs["phi"] >= s.stop_packing_fraction:
-            self.finished = True
-            self.stop_reason = f"φ = {obs['phi']:.4f} reached"
-        if self.finished:
-            self.events.append(f"compaction stopped at t = {state.time:.6g} s: "
-                               f"{self.stop_reason}")
+        else:
+            self._comp_steps += 1
+            if (s.stop_stress_ratio is not None
+                    and self._sigma >= s.stop_stress_ratio * s.sigma0):
+                self.stop_reason = f"σ_yy/σ0 = {self._sigma / s.sigma0:.4g} reached"
+            elif s.stop_packing_fraction is not None and obs["phi"] >= s.stop_packing_fraction:
+                self.stop_reason = f"φ = {obs['phi']:.4f} reached"
+            if self.stop_reason:
+                self.finished = True
+                self.events.append(f"compaction stopped at t = {state.time:.6g} s: "
+                                   f"{self.stop_reason}")
         obs["phase"] = phase
         return obs
 

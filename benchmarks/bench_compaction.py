@@ -1,0 +1,84 @@
+"""Benchmark: 30 neo-Hookean disks squeezed in a box by a wall at 5 m/s (issue 3, item 8;
+issue 4, item 8).
+
+The sample of examples/compaction_frictionless.toml (E = 10 MPa, ν = 0.4, d = 1 cm) is
+compacted from its loose deposit (no pre-compaction: the top wall starts at 5 m/s) for a
+fixed number of steps at each time step Δt and each local relation. Prints time per step,
+coupling iterations and Gauss–Seidel sweeps per step, contacts, material-point updates per
+second, and the time the wall would take to move by one mean diameter (d/v/Δt steps at the
+measured cost). Run:  python benchmarks/bench_compaction.py [--dh 10] [--steps 10]
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import platform
+import resource
+import time
+from pathlib import Path
+
+import numba
+
+from softgrains.case import load_case
+from softgrains.errors import SimulationError
+from softgrains.simulation import Simulation
+
+EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "compaction_frictionless.toml"
+D, SPEED = 0.01, 5.0
+
+
+def measure(d_over_h: float, dt: float, relation: str, steps: int, density: float) -> dict:
+    case = load_case(EXAMPLE, {
+        "grid.cell_size": D / d_over_h, "simulation.dt": dt, "simulation.end_time": 1.0,
+        "protocol.precompaction_max_steps": 1, "protocol.precompaction_dt": dt,
+        "protocol.compaction_dt_ramp": 1.0, "protocol.stop_stress_ratio": 1e9,
+        "contact.local_relation": relation, "contact.on_failure": "warn",
+        "materials.gel.density": density, "output.progress": False})
+    case.protocol.sigma0 = 1e-9  # no pre-compaction: compaction from the first steps
+    sim = Simulation(case)
+    sim.step()  # compilation, and the switch to the compaction phase
+    iterations = sweeps = contacts = unconverged = 0
+    t0 = time.perf_counter()
+    try:
+        for _ in range(steps):
+            dg = sim.step()
+            iterations += dg.contact.iterations
+            sweeps += dg.contact.sweeps
+            contacts += dg.contact.active
+            unconverged += not dg.contact.converged
+    except SimulationError as err:
+        return {"failed": str(err).split(";")[0]}
+    per_step = (time.perf_counter() - t0) / steps
+    return {"ms/step": 1e3 * per_step, "its/step": iterations / steps,
+            "sweeps/step": sweeps / steps, "contacts": contacts / steps,
+            "Mpts/s": sim.model.n_points / per_step / 1e6, "points": sim.model.n_points,
+            "unconverged": unconverged, "time for d [s]": D / SPEED / dt * per_step}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--dh", type=float, default=10.0, help="D/h (default 10)")
+    parser.add_argument("--steps", type=int, default=10)
+    parser.add_argument("--density", type=float, default=100.0)
+    parser.add_argument("--dt", type=float, nargs="+", default=[1e-7, 1e-6, 1e-5])
+    args = parser.parse_args()
+    print(f"# {platform.machine()}, {numba.get_num_threads()} Numba threads, D/h = {args.dh}, "
+          f"density {args.density} kg/m³, {args.steps} steps after one warm-up step")
+    print("| Δt [µs] | relation | points | ms/step | coupling its/step | sweeps/step | "
+          "active contacts | Mpts/s | wall time to move d [s] | unconverged steps |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for dt, relation in itertools.product(args.dt, ("delassus", "lumped")):
+        r = measure(args.dh, dt, relation, args.steps, args.density)
+        if "failed" in r:
+            print(f"| {dt * 1e6:g} | {relation} | | failed: {r['failed']} | | | | | | |")
+            continue
+        print(f"| {dt * 1e6:g} | {relation} | {r['points']} | {r['ms/step']:.0f} | "
+              f"{r['its/step']:.1f} | {r['sweeps/step']:.0f} | {r['contacts']:.0f} | "
+              f"{r['Mpts/s']:.3f} | {r['time for d [s]']:.0f} | {r['unconverged']} |",
+              flush=True)
+    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB")
+
+
+if __name__ == "__main__":
+    main()
