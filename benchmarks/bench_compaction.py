@@ -32,7 +32,7 @@ def measure(d_over_h: float, dt: float, relation: str, steps: int, density: floa
     case = load_case(EXAMPLE, {
         "grid.cell_size": D / d_over_h, "simulation.dt": dt, "simulation.end_time": 1.0,
         "protocol.precompaction_max_steps": 1, "protocol.precompaction_dt": dt,
-        "protocol.compaction_dt_ramp": 1.0, "protocol.stop_stress_ratio": 1e9,
+        "protocol.wall_speed_ramp": 0.0, "protocol.stop_stress_ratio": 1e9,
         "contact.local_relation": relation, "contact.on_failure": "warn",
         "materials.gel.density": density, "output.progress": False})
     case.protocol.sigma0 = 1e-9  # no pre-compaction: compaction from the first steps

@@ -128,3 +128,32 @@ def test_info(capsys: pytest.CaptureFixture[str]) -> None:
         "GPU:",
     ):
         assert expected in out
+
+
+def test_run_several_cases_in_parallel_into_one_folder(tmp_path: Path) -> None:
+    """`softgrains run A.toml B.toml --out DIR`: each case in DIR/<name>, both complete,
+    each gets its figures; one failing case gives exit 3 and does not stop the other."""
+    text = EXAMPLE.read_text()
+    (tmp_path / "a.toml").write_text(text)
+    (tmp_path / "b.toml").write_text(text.replace("end_time = 0.1", "end_time = 0.005"))
+    out = tmp_path / "runs"
+    status, stdout, stderr = run_cli("run", tmp_path / "a.toml", tmp_path / "b.toml",
+                                     "--out", out, "--set", "simulation.end_time=0.005")
+    assert status == 0, stderr
+    for name in ("a", "b"):
+        assert (out / name / "summary.json").is_file()
+        assert (out / name / "figures" / "energy.png").is_file()
+    assert "a.toml: done" in stdout and "b.toml: done" in stdout
+    # b's disk pushed out of the grid fails; a completes
+    (tmp_path / "b.toml").write_text(text.replace("velocity = [", "velocity = [200.0, 0.0] #["))
+    status, stdout, _ = run_cli("run", tmp_path / "a.toml", tmp_path / "b.toml", "--out", out,
+                                "--set", "simulation.end_time=0.005")
+    assert status == 3 and "a.toml: done" in stdout and "b.toml: FAILED" in stdout
+
+
+def test_same_file_names_are_refused(tmp_path: Path) -> None:
+    (tmp_path / "x").mkdir()
+    (tmp_path / "x" / "a.toml").write_text(EXAMPLE.read_text())
+    (tmp_path / "a.toml").write_text(EXAMPLE.read_text())
+    status, _, stderr = run_cli("run", tmp_path / "a.toml", tmp_path / "x" / "a.toml")
+    assert status == 2 and "same file name" in stderr

@@ -118,8 +118,15 @@ def _run(args: argparse.Namespace) -> int:
     jobs = args.jobs or min(len(cases), os.cpu_count() or 1)
     statuses = _run_parallel(args.cases, args.overrides, outs, max(1, jobs))
     done = [out for out, status in zip(outs, statuses, strict=True) if status == EXIT_OK]
-    if done and args.figures:
-        _draw(done, root / "figures")
+    if args.figures:
+        # a failed run's rows up to its failure are valid: draw them too when they can be
+        written = [out for out in outs if (out / "series.csv").is_file()]
+        try:
+            _draw(written, root / "figures")
+        except CaseError as error:
+            _error(f"figures with every run failed ({error}); drawing the finished runs")
+            if done:
+                _draw(done, root / "figures")
     return max(statuses)
 
 

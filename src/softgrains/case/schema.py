@@ -323,9 +323,9 @@ class ProtocolSettings(_Section):
         0.01, gt=0, lt=1, description="equilibrium: |σ − σ0| ≤ tolerance σ0")
     kinetic_ratio: float = Field(
         1e-3, gt=0, lt=1, description="equilibrium: kinetic ≤ ratio × strain energy")
-    compaction_dt_ramp: float = Field(
-        1.0, ge=1.0, le=1e4, description="the compaction starts with steps of dt/ramp, "
-        "growing 10% a step up to dt")
+    wall_speed_ramp: float = Field(
+        0.0, ge=0.0, description="time for the top wall to reach wall_speed from rest [s] "
+        "(0: at once)")
     precompaction_max_steps: int | None = Field(
         None, ge=1, description="start the compaction after this many pre-compaction steps "
         "even out of equilibrium (logged)")

@@ -11,9 +11,8 @@ at 5 kPa) must stay below 1: a secant estimate of K made the wall oscillate (σ 
 and 4 σ0), measured 2026-11-23.
 Equilibrium when |σ − σ0| ≤ tol σ0 and the kinetic energy of the grains that are not
 rattlers ≤ ratio × strain energy; then h0 (wall gap) and φ0 are recorded and the
-compaction starts: v = −wall_speed (steps from dt/compaction_dt_ramp growing by RAMP_GROWTH
-to dt) until σ_yy ≥ stop_stress_ratio σ0 or φ ≥
-stop_packing_fraction.
+compaction starts: v = −wall_speed (reached linearly in wall_speed_ramp seconds) until
+σ_yy ≥ stop_stress_ratio σ0 or φ ≥ stop_packing_fraction.
 """
 
 from __future__ import annotations
@@ -25,7 +24,6 @@ from softgrains.sample import WALLS
 
 PRECOMPACTION, COMPACTION = "precompaction", "compaction"
 SERVO_GAIN = 0.25
-RAMP_GROWTH = 1.1  # growth of the compaction time step per step, from dt/compaction_dt_ramp
 SMOOTHING = 0.3  # weight of the newest σ_yy in the running average that drives the control
 
 
@@ -49,7 +47,7 @@ class UniaxialCompaction:
         self._engaged = False  # the stress control has taken over from the approach
         self._smooth = 0.0  # σ_yy averaged over the last steps (impacts make it jump)
         self._pre_steps = 0
-        self._comp_steps = 0
+        self._t_compaction = 0.0
 
     # -- control -------------------------------------------------------------------------
     def time_step(self) -> float:
@@ -57,15 +55,17 @@ class UniaxialCompaction:
         s = self.settings
         if self.phase == PRECOMPACTION:
             return s.precompaction_dt if s.precompaction_dt is not None else self.dt
-        # the first steps of the compaction are smaller: dt/ramp growing 10% a step, so that
-        # the first regime (σ0 to ~30 σ0 within ~2% strain) is resolved
-        return min(self.dt, self.dt / s.compaction_dt_ramp * RAMP_GROWTH ** self._comp_steps)
+        return self.dt
 
     def before_step(self, state) -> None:
         """Set the top wall's velocity for the coming step."""
         s, top = self.settings, self.walls["wall_top"]
         if self.phase == COMPACTION:
-            v = -s.wall_speed
+            # from rest to wall_speed in wall_speed_ramp seconds: a sudden start sends an
+            # impact wave (σ ≈ ρ c v, ~30 σ0 at 5 m/s in the examples) through the sample
+            elapsed = state.time + 0.5 * self.dt - self._t_compaction
+            ramp = s.wall_speed_ramp
+            v = -s.wall_speed * (min(1.0, elapsed / ramp) if ramp > 0 else 1.0)
         else:
             error = (s.sigma0 - self._smooth) / s.sigma0
             if not self._engaged and self._smooth >= 0.5 * s.sigma0:
@@ -95,6 +95,7 @@ class UniaxialCompaction:
             if (balanced and calm) or out_of_time:
                 self.h0, self.phi0 = obs["wall_gap"], obs["phi"]
                 self.phase = COMPACTION
+                self._t_compaction = state.time
                 how = ("equilibrium" if balanced and calm else
                        f"NOT in equilibrium after precompaction_max_steps = "
                        f"{s.precompaction_max_steps} (|σ − σ0|/σ0 = "
@@ -106,7 +107,6 @@ class UniaxialCompaction:
                     f"{self._sigma:.4g} Pa, h0 = {self.h0:.6g} m, φ0 = {self.phi0:.4f}; "
                     f"compaction at {s.wall_speed:g} m/s")
         else:
-            self._comp_steps += 1
             if (s.stop_stress_ratio is not None
                     and self._sigma >= s.stop_stress_ratio * s.sigma0):
                 self.stop_reason = f"σ_yy/σ0 = {self._sigma / s.sigma0:.4g} reached"
