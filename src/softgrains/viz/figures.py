@@ -7,17 +7,23 @@ import json
 from collections.abc import Sequence
 from pathlib import Path
 
+import numpy as np
+
+from softgrains.io.tables import read_table
 from softgrains.viz.compaction import plot_compaction
 from softgrains.viz.series import plot_run
 
 
 def is_compaction_run(run_dir: Path) -> bool:
-    """True when the run's summary.json records a compaction protocol."""
+    """True when the run's summary.json records a compaction protocol and its series.csv
+    has compaction rows (a run stopped during the pre-compaction has no curve to draw)."""
     try:
         summary = json.loads((run_dir / "summary.json").read_text())
+        series = read_table(run_dir / "series.csv")
     except (OSError, ValueError):
         return False
-    return isinstance(summary.get("protocol"), dict)
+    return (isinstance(summary.get("protocol"), dict) and "phase" in series
+            and bool(np.any(series["phase"] == "compaction")))
 
 
 def draw_figures(run_dirs: Sequence[str | Path], out_dir: str | Path | None = None
