@@ -21,8 +21,8 @@ from matplotlib.colors import Colormap, Normalize
 from matplotlib.figure import Figure
 
 from softgrains.errors import CaseError
-from softgrains.io.tables import read_table
 from softgrains.io.vtk import read_points_vtu, read_pvd
+from softgrains.viz.series import read_run_series
 
 _REQUIRED_COLUMNS = ("time", "phase", "phi", "stress_yy", "coordination", "wall_gap")
 _REQUIRED_PROTOCOL = ("sigma0", "phi0", "h0")
@@ -101,12 +101,7 @@ def _read_protocol(folder: Path) -> dict[str, object]:
 def _read_series(folder: Path) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """``series.csv`` sorted by time, and the mask of its compaction rows."""
     path = folder / "series.csv"
-    if not path.is_file():
-        raise CaseError(f"{folder}: no series.csv (is this a softgrains output folder?)")
-    series = read_table(path)
-    missing = [name for name in _REQUIRED_COLUMNS if name not in series]
-    if missing:
-        raise CaseError(f"{path}: missing compaction columns {', '.join(missing)}")
+    series = read_run_series(folder, _REQUIRED_COLUMNS, "compaction ")
     order = np.argsort(series["time"], kind="stable")
     series = {name: values[order] for name, values in series.items()}
     compaction = np.char.strip(series["phase"].astype(str)) == _COMPACTION

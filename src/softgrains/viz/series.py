@@ -27,19 +27,26 @@ def _new_axes(xlabel: str, ylabel: str) -> tuple[Figure, Axes]:
     return figure, axes
 
 
+def read_run_series(run_dir: Path, required: tuple[str, ...] | list[str],
+                    what: str = "") -> dict[str, np.ndarray]:
+    """``run_dir/series.csv`` as columns; CaseError when it is absent or lacks a column."""
+    path = run_dir / "series.csv"
+    if not path.is_file():
+        raise CaseError(f"{run_dir}: no series.csv (is this a softgrains output folder?)")
+    series = read_table(path)
+    missing = [name for name in required if name not in series]
+    if missing:
+        raise CaseError(f"{path}: missing {what}columns {', '.join(missing)}")
+    return series
+
+
 def plot_run(run_dir: str | Path) -> list[Path]:
     """Draw ``figures/energy.png`` and ``figures/newton.png`` from ``run_dir/series.csv``.
 
     Works on a finished or a running run; returns the paths of the files written.
     """
     run_dir = Path(run_dir)
-    series_path = run_dir / "series.csv"
-    if not series_path.is_file():
-        raise CaseError(f"{run_dir}: no series.csv to plot (is this a softgrains output folder?)")
-    series = read_table(series_path)
-    missing = [name for name in _REQUIRED if name not in series]
-    if missing:
-        raise CaseError(f"{series_path}: missing columns {', '.join(missing)}")
+    series = read_run_series(run_dir, _REQUIRED)
     figures_dir = run_dir / "figures"
     figures_dir.mkdir(exist_ok=True)
     time = series["time"]
