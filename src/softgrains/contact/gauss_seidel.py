@@ -94,6 +94,7 @@ def gauss_seidel(a_slot, a_col, b_slot, b_col, wall_va, wall_vb, normal, gap_ove
     """
     n, d = normal.shape
     Wc = np.empty((d, d))
+    w = np.empty(d)
     w_free = np.empty(d)
     P_new = np.empty(d)
     dP = np.empty(d)
@@ -122,28 +123,21 @@ def gauss_seidel(a_slot, a_col, b_slot, b_col, wall_va, wall_vb, normal, gap_ove
             pn = 0.0
             for p in range(d):
                 pn += P[c, p] * normal[c, p]
-            for p in range(d):
                 va = V[k_off[sa] + a_col[c], p] if sa >= 0 else wall_va[c, p]
                 vb = V[k_off[sb] + b_col[c], p] if sb >= 0 else wall_vb[c, p]
-                # own impulse removed with the same scalar compliances the local law uses,
-                # so that a fixed point satisfies Signorini–Coulomb exactly
-                w_free[p] = (va - vb - wnn * pn * normal[c, p]
-                             - (wtt if m_t > 0.0 else 0.0) * (P[c, p] - pn * normal[c, p]))
+                w[p] = va - vb
             state = -1
-            if d == 2:
-                for p in range(d):  # the own impulse removed with the full W_c
-                    w_free[p] += wnn * pn * normal[c, p] + (
-                        (wtt if m_t > 0.0 else 0.0) * (P[c, p] - pn * normal[c, p]))
+            if d == 2:  # exact, the own impulse removed with the full W_c
+                for p in range(d):
+                    w_free[p] = w[p]
                     for q in range(d):
                         w_free[p] -= Wc[p, q] * P[c, q]
                 state = local_impulse_2d(w_free, normal[c], Wc, gap_over_dt[c], mu[c], P_new)
-                if state < 0:  # back to the scalar-mass form
-                    for p in range(d):
-                        for q in range(d):
-                            w_free[p] += Wc[p, q] * P[c, q]
-                        w_free[p] -= wnn * pn * normal[c, p] + (
-                            (wtt if m_t > 0.0 else 0.0) * (P[c, p] - pn * normal[c, p]))
-            if state < 0:
+            if state < 0:  # scalar masses, the own impulse removed with the same scalars
+                ct = wtt if m_t > 0.0 else 0.0
+                for p in range(d):
+                    w_free[p] = (w[p] - wnn * pn * normal[c, p]
+                                 - ct * (P[c, p] - pn * normal[c, p]))
                 state = local_impulse(w_free, normal[c], 1.0 / wnn, m_t, gap_over_dt[c],
                                       mu[c], P_new)
             status[c] = state
