@@ -3,10 +3,11 @@ issue 4, item 8).
 
 The sample of examples/compaction_frictionless.toml (E = 10 MPa, ν = 0.4, d = 1 cm) is
 pre-compacted under σ0 once, then compacted by the top wall at 5 m/s (no ramp) for a fixed
-number of steps from that same state at each time step Δt and each local relation. Prints
-time per step, coupling iterations and Gauss–Seidel sweeps per step, contacts, material-point updates per
-second, and the time the wall would take to move by one mean diameter (d/v/Δt steps at the
-measured cost). Run:  python benchmarks/bench_compaction.py [--dh 10] [--steps 10]
+number of steps from that same state at each time step Δt and each local relation.
+Prints time per step, coupling iterations and Gauss–Seidel sweeps per step, contacts,
+material-point updates per second, and the time the wall would take to move by one mean
+diameter (d/v/Δt steps at the measured cost).
+Run:  python benchmarks/bench_compaction.py [--dh 10] [--steps 10]
 """
 
 from __future__ import annotations
