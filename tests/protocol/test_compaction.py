@@ -131,3 +131,21 @@ def test_coordination_counts_force_bearing_pairs_and_rattlers():
     assert z["coordination_walls"] == pytest.approx((2 * 2 + 2) / 4)
     assert z["rattler_fraction"] == pytest.approx(1 / 4)
     assert z["coordination_no_rattlers"] == pytest.approx(2 * 2 / 3)
+
+
+@pytest.mark.parametrize(("change", "expected"), [
+    ({"count": 10**5, "mean_diameter": 0.1}, "[sample.count] = 100000: gives about"),
+    ({"box_width": 0.005}, "box_width = 0.005 m is smaller than the largest diameter"),
+    ({"material": "gell"}, '[sample.material] = "gell": no such material; did you mean \'gel\'?'),
+])
+def test_impossible_samples_are_case_errors(change, expected):
+    from softgrains.errors import CaseError
+
+    data = small_compaction().model_dump()
+    case = {k: data[k] for k in ("simulation", "grid", "materials", "protocol")}
+    case["grid"] = {"cell_size": 2e-3}
+    case["sample"] = {"count": 6, "mean_diameter": 0.01, "box_width": 0.02,
+                      "material": "gel", **change}
+    with pytest.raises(CaseError) as error:
+        load_case(case)
+    assert expected in str(error.value)
