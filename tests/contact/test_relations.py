@@ -8,15 +8,16 @@ from softgrains import Simulation, load_case
 from softgrains.errors import CaseError, SimulationError
 
 
-def _disk_dropped_on_slab(relation, dt, end_time=0.1, **contact):
-    """A disk (R = 0.2 m, D/h = 10, E = 0.1 MPa, c = 10 m/s) released 0.01 m above a
-    kinematic slab under gravity, θ = 1. Δt = 10 ms is Δt c/h = 2.5."""
+def _disk_dropped_on_slab(relation, dt, end_time=0.1, h=0.04, drop=0.01, **contact):
+    """A disk (R = 0.2 m, E = 0.1 MPa, c = 10 m/s; D/h = 10 by default) released ``drop``
+    above a kinematic slab (top at y = 0.5) under gravity, θ = 1. Δt = 10 ms is
+    Δt c/h = 2.5 at D/h = 10."""
     return Simulation(load_case({
         "simulation": {"dt": dt, "end_time": end_time, "theta": 1.0},
-        "grid": {"cell_size": 0.04, "origin": [0.0, 0.0], "size": [1.0, 1.0]},
+        "grid": {"cell_size": h, "origin": [0.0, 0.0], "size": [1.0, 1.0]},
         "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [{"name": "disk", "shape": "disk", "center": [0.5, 0.71], "radius": 0.2,
-                    "material": "gel"},
+        "bodies": [{"name": "disk", "shape": "disk", "center": [0.5, 0.7 + drop],
+                    "radius": 0.2, "material": "gel"},
                    {"name": "slab", "shape": "rectangle", "lower": [0.1, 0.3],
                     "upper": [0.9, 0.5], "material": "gel", "kind": "kinematic"}],
         "gravity": {"acceleration": [0.0, -10.0]},
@@ -150,17 +151,7 @@ def test_resting_disk_boundary_gap(gap):
     (2026-11-23): −0.017 h with the gap treatment, +0.364 h on mass overlap alone (D/h = 40:
     −0.029 h and +0.334 h)."""
     h = 0.02
-    sim = Simulation(load_case({
-        "simulation": {"dt": 0.01, "end_time": 0.6, "theta": 1.0},
-        "grid": {"cell_size": h, "origin": [0.0, 0.0], "size": [1.0, 1.0]},
-        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [{"name": "disk", "shape": "disk", "center": [0.5, 0.705], "radius": 0.2,
-                    "material": "gel"},
-                   {"name": "slab", "shape": "rectangle", "lower": [0.1, 0.3],
-                    "upper": [0.9, 0.5], "material": "gel", "kind": "kinematic"}],
-        "gravity": {"acceleration": [0.0, -10.0]},
-        "contact": {"gap": gap},
-    }))
+    sim = _disk_dropped_on_slab("delassus", dt=0.01, end_time=0.6, h=h, drop=0.005, gap=gap)
     for _ in range(sim.n_steps):
         sim.step()
     lowest = sim.state.x[sim.model.bodies[0].points, 1].min() - h / 4  # boundary: δ/2 below

@@ -36,14 +36,13 @@ MAX_SWEEPS_PER_ITERATION = 200  # Gauss–Seidel sweeps between two Newton updat
 
 @dataclass(frozen=True)
 class CouplingSettings:
-    """How the loop runs: local relation, tolerance, iteration limit, gap treatment and
-    what to do when the limit is reached (``stop``: SimulationError; ``warn``: go on and
-    flag the step)."""
+    """How the loop runs: local relation, tolerance, iteration limit, what to do when the
+    limit is reached (``stop``: SimulationError; ``warn``: go on and flag the step) and the
+    normal. (The gap treatment is on when the caller passes ``gap_points``.)"""
 
     relation: str = "delassus"
     tolerance: float = 1e-4
     max_iterations: int = 2000
-    gap: bool = True
     on_failure: str = "stop"
     normal: str = "difference"
 
@@ -71,8 +70,13 @@ class ContactState:
     gap: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     def keys(self) -> list[tuple[int, int, int]]:
-        n = self.nodes
-        return list(zip(n.node.tolist(), n.alpha.tolist(), n.beta.tolist(), strict=True))
+        return _keys(self.nodes)
+
+
+def _keys(nodes: ContactNodes) -> list[tuple[int, int, int]]:
+    """(node, α, β) per contact: what identifies a contact from one step to the next."""
+    return list(zip(nodes.node.tolist(), nodes.alpha.tolist(), nodes.beta.tolist(),
+                    strict=True))
 
 
 def _subset(contacts: ContactNodes, keep: np.ndarray) -> ContactNodes:
@@ -168,7 +172,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
 
     if warm is not None and len(warm.nodes):
         previous = dict(zip(warm.keys(), warm.impulse, strict=True))
-        for c, key in enumerate(ContactState(contacts, P, status).keys()):
+        for c, key in enumerate(_keys(contacts)):
             if key in previous:
                 P[c] = previous[key]
         _pass_on(steps, slots, _row_sums(slots, P), move=False)
@@ -213,8 +217,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         diag.message = (
             f"step {step}: the contact loop did not converge in {settings.max_iterations} "
             f"iterations (impulse change {diag.residual:.2e} of the largest impulse, "
-            f"{settings.relation} relation); try a smaller dt, more contact max_iterations, "
-            "a looser contact tolerance or local_relation = \"delassus\".")
+            f"{settings.relation} relation); try a smaller dt, more contact max_iterations"
+            + (", a looser contact tolerance or local_relation = \"delassus\"."
+               if settings.relation == "lumped" else " or a looser contact tolerance."))
         if settings.on_failure == "stop":
             raise SimulationError(diag.message, step=step)
     diag.active = int(np.sum(np.any(P != 0.0, axis=1)))
@@ -238,10 +243,4 @@ def _pass_on(steps: dict, slots: _Slots, Q: np.ndarray, move: bool) -> None:
         q = Q[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]]
         if not np.any(q):
             continue
-        s = steps[body]
-        if move:
-            s.apply_impulses(slots.rows[slot], q, slots.response[slot])
-        else:
-            s.b[slots.rows[slot]] += s.impulse_weight * q
-            s.contact_impulse[slots.rows[slot]] += q
-            s.refresh()
+        steps[body].apply_impulses(slots.rows[slot], q, slots.response[slot], move)

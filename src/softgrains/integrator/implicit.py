@@ -191,8 +191,8 @@ class BodyStep:
     Set-up (P2G, active nodes, Dirichlet values, R = c_m M u − b − s f^int) happens at
     construction; :meth:`converged` records the residual and checks the stopping test;
     :meth:`newton_update` makes one Newton iteration with line search; :meth:`finish` moves
-    the points (G2P). The contact loop (issue #3) will interleave its Gauss–Seidel sweeps
-    with :meth:`newton_update`, adding the impulses to ``b``.
+    the points (G2P). The contact loop (contact/coupling.py) interleaves its Gauss–Seidel
+    sweeps with :meth:`newton_update` and passes the impulses on with :meth:`apply_impulses`.
     """
 
     def __init__(self, stepper: BodyStepper, pts: BodyPoints, gravity: np.ndarray, dt: float,
@@ -329,18 +329,22 @@ class BodyStep:
         return self._v_affine
 
     def apply_impulses(self, rows: np.ndarray, Q: np.ndarray,
-                       response: np.ndarray | None = None) -> None:
+                       response: np.ndarray | None = None, move: bool = True) -> None:
         """Add impulse changes Q (k, d) at distinct active ``rows`` (−P in R for θ, −P/(γΔt)
         for Newmark) and move the iterate by the linear response, so that the velocities
         seen by the Gauss–Seidel sweep stay consistent with u.
 
         ``response`` (from :meth:`contact_response`) is A⁻¹ at the rows' dofs; without it the
-        lumped relation moves only the rows: Δu = w Q/(c_m m). The residual is refreshed; a
-        move that would invert a point is not made (the impulses still enter b).
+        lumped relation moves only the rows: Δu = w Q/(c_m m). With ``move`` False (warm
+        start) u stays and the next Newton update takes the impulses in. The residual is
+        refreshed; a move that would invert a point is not made (the impulses still enter b).
         """
         w = self.impulse_weight
         self.b[rows] += w * Q
         self.contact_impulse[rows] += Q
+        if not move:
+            self.refresh()
+            return
         u_before = self.u.copy()
         if response is None:
             self.u[rows] += w * Q / (self.c_m * self.m[rows])
@@ -473,18 +477,14 @@ class BodyStep:
             update = UPDATE_PARTICLE_NEWMARK if self.newmark else UPDATE_PARTICLE_THETA
         else:
             update = UPDATE_FLIP_NEWMARK if self.newmark else UPDATE_FLIP_THETA
-            v_n, a_n = self.v_n, self.a_n
             if self.newmark:
-                a1 = self.c_m * (u - dt * v_n) - (0.5 / st.beta - 1.0) * a_n
-                v1 = v_n + dt * ((1.0 - st.gamma) * a_n + st.gamma * a1)
+                a1 = self.c_m * (u - dt * self.v_n) - (0.5 / st.beta - 1.0) * self.a_n
                 # the contact impulse changes the velocity (P/m) but is not kept in the stored
                 # acceleration: there it would replay the impact in the next step (a node
                 # striking a wall rebounded at 0.8 of its speed; ALGORITHM.md §3, §5)
                 a_new[active] = a1 - self.contact_impulse / (st.gamma * dt * self.m)
-            else:
-                v1 = (u / dt - (1.0 - st.theta) * v_n) / st.theta
             v_old[active] = self.v_free  # so that fixed nodes pass their velocity on
-            v_new[active] = v1
+            v_new[active] = self.node_velocity(np.arange(u.shape[0]))
         params = np.array([dt, st.flip, st.theta, st.beta, st.gamma])
         pts = self.pts
         jmin = grid_to_particles(self.nodes, self.N, self.dN, u_box, v_old, v_new, a_new,

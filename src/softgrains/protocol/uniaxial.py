@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from softgrains.observe.compaction import box_stresses, coordination_and_rattlers, wall_gap
+from softgrains.observe.compaction import box_stresses, coordination_and_rattlers
 from softgrains.sample import WALLS
 
 PRECOMPACTION, COMPACTION = "precompaction", "compaction"
@@ -82,13 +82,13 @@ class UniaxialCompaction:
         free grain keeps its velocity)."""
         s = self.settings
         phase = self.phase
-        obs = self.observe(state, forces, contacts)
+        obs, rattlers = self._observe(state, forces, contacts)
         self._sigma = obs["stress_yy"]
         self._smooth += SMOOTHING * (self._sigma - self._smooth)
         if phase == PRECOMPACTION:
             self._pre_steps += 1
             balanced = abs(self._sigma - s.sigma0) <= s.stress_tolerance * s.sigma0
-            kinetic = float(kinetic[self.is_grain & ~self.rattlers].sum())
+            kinetic = float(kinetic[self.is_grain & ~rattlers].sum())
             calm = kinetic <= s.kinetic_ratio * strain
             out_of_time = (s.precompaction_max_steps is not None
                            and self._pre_steps >= s.precompaction_max_steps)
@@ -121,16 +121,17 @@ class UniaxialCompaction:
 
     def observe(self, state, forces: np.ndarray, contacts) -> dict[str, object]:
         """The observables of the current state (no side effect)."""
+        return self._observe(state, forces, contacts)[0]
+
+    def _observe(self, state, forces, contacts) -> tuple[dict[str, object], np.ndarray]:
+        """The observables and the rattler mask over bodies."""
         obs: dict[str, object] = {"phase": self.phase}
         obs.update(box_stresses(self.model, state, self.walls, self.grain_points, self.width,
                                 forces))
-        values, self.rattlers = coordination_and_rattlers(contacts, self.is_grain)
+        values, rattlers = coordination_and_rattlers(contacts, self.is_grain)
         obs.update(values)
         obs["top_wall_velocity"] = float(state.body_velocity[self.walls["wall_top"], 1])
-        return obs
-
-    def gap(self, state) -> float:
-        return wall_gap(self.model, state, self.walls)
+        return obs, rattlers
 
     def summary(self) -> dict[str, object]:
         s = self.settings
