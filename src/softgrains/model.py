@@ -13,7 +13,7 @@ from functools import cached_property
 import numpy as np
 
 from softgrains.errors import CaseError
-from softgrains.geometry import Disk, Polygon, Rectangle, Shape, seed_points
+from softgrains.geometry import Disk, Polygon, Rectangle, Shape, seed_disk_rings, seed_points
 from softgrains.grid.lattice import Lattice
 from softgrains.grid.shape_functions import SHAPE_FUNCTIONS
 from softgrains.integrator.implicit import DirichletBox, IntegratorSettings
@@ -116,7 +116,11 @@ def build(case) -> tuple[Model, State]:
     start = 0
     for b, body in enumerate(case.bodies):
         shape = make_shape(body)
-        x, v0 = seed_points(shape, lattice.domain_lower, grid.cell_size, grid.points_per_cell)
+        if getattr(body, "seeding", "lattice") == "rings":
+            x, v0 = seed_disk_rings(shape, grid.cell_size / grid.points_per_cell)
+        else:
+            x, v0 = seed_points(shape, lattice.domain_lower, grid.cell_size,
+                                grid.points_per_cell)
         name = body.name or f"body{b}"
         if len(x) == 0:
             raise CaseError(f"[bodies.{b}] ('{name}'): the shape holds no material point at "
@@ -127,8 +131,8 @@ def build(case) -> tuple[Model, State]:
         n = len(x)
         xs.append(x)
         vs.append(_initial_velocity(body, shape, x))
-        masses.append(np.full(n, mat.density * v0))
-        vols.append(np.full(n, v0))
+        masses.append(mat.density * np.broadcast_to(v0, n))
+        vols.append(np.broadcast_to(v0, n).astype(float))
         laws.append(np.full(n, law_code(mat.law), dtype=np.int64))
         lams.append(np.full(n, lam))
         mus.append(np.full(n, mu))

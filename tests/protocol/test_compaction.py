@@ -29,7 +29,9 @@ def small_compaction(friction=0.0, **protocol):
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("compaction")
-    sim = Simulation(small_compaction(), out=out)
+    # 1 m/s: six disks two diameters wide collapse in bursts at 5 m/s (kinetic energy up to
+    # the strain energy), which leaves too few quasi-static steps to compare stresses on
+    sim = Simulation(small_compaction(wall_speed=1.0), out=out)
     summary = sim.run()
     return out, summary, read_table(out / "series.csv")
 
@@ -65,8 +67,8 @@ def test_precompaction_reaches_sigma0_then_compaction_to_the_stop(run):
     assert series["stress_yy"][last_pre] == pytest.approx(5e3, rel=0.01)
     assert protocol["phi0"] == pytest.approx(series["phi"][last_pre])
     assert protocol["h0"] == pytest.approx(series["wall_gap"][last_pre])
-    # compaction: the wall moves at 5 m/s, the gap shrinks, φ and the stress grow
-    assert np.allclose(series["top_wall_velocity"][comp], -5.0)
+    # compaction: the wall moves at 1 m/s, the gap shrinks, φ and the stress grow
+    assert np.allclose(series["top_wall_velocity"][comp], -1.0)
     assert np.all(np.diff(series["wall_gap"][comp]) < 0)
     assert np.all(np.diff(series["phi"][comp]) > 0)
     assert series["stress_yy"][comp][-1] >= 30 * 5e3
@@ -75,15 +77,16 @@ def test_precompaction_reaches_sigma0_then_compaction_to_the_stop(run):
 
 
 def test_wall_stress_matches_the_volume_averaged_stress(run):
-    """ALGORITHM.md §9 cross-check once quasi-static (kinetic ≤ 0.1 × strain energy: six
-    disks two diameters wide collapse in bursts at 5 m/s). Measured (2026-11-23): the
-    averaged σ_yy within 0.93–1.05 of the wall's on the 7 such steps; 0.57–1.28 on the others."""
+    """ALGORITHM.md §9 cross-check once quasi-static (kinetic ≤ 0.01 × strain energy).
+    Measured (2026-11-23, wall at 1 m/s): on the 26 such steps the averaged σ_yy is within
+    5.4% of the wall's (1.9% on average); up to 14% off when kinetic ≤ 0.1 × strain."""
     _, _, series = run
     comp = series["phase"] == "compaction"
-    calm = comp & (series["kinetic_energy"] <= 0.1 * series["strain_energy"])
-    assert calm.sum() >= 4
-    ratio = series["stress_yy_avg"][calm] / series["stress_yy"][calm]
-    assert np.all(np.abs(ratio - 1.0) < 0.1)
+    calm = comp & (series["kinetic_energy"] <= 0.01 * series["strain_energy"])
+    assert calm.sum() >= 10
+    deviation = np.abs(series["stress_yy_avg"][calm] / series["stress_yy"][calm] - 1.0)
+    assert deviation.mean() < 0.03
+    assert deviation.max() < 0.07
 
 
 def test_series_and_summary_carry_the_compaction_observables(run):

@@ -182,6 +182,9 @@ class Body(_Section):
         None, description="initial velocity gradient L [1/s]: adds L (x - centroid)"
     )
     velocity_sine: VelocitySine | None = Field(None, description="initial sine velocity field")
+    seeding: Literal["lattice", "rings"] = Field(
+        "lattice", description="material points on the grid-aligned sub-lattice, or on "
+        "concentric rings (disks only: a round boundary instead of a staircase)")
     _generated: bool = PrivateAttr(False)  # made by [sample], not written back
 
     @property
@@ -231,6 +234,9 @@ class Body(_Section):
                 elif shape != self.shape and value is not None:
                     message = f"only for shape = '{shape}', not '{self.shape}': remove it"
                     problems.append(Problem((key,), value, message))
+        if self.seeding == "rings" and self.shape != "disk":
+            message = f"'rings' is only for shape = 'disk', not '{self.shape}': use 'lattice'"
+            problems.append(Problem(("seeding",), self.seeding, message))
         if self.kind == "kinematic":
             for key in ("velocity_gradient", "velocity_sine"):
                 value = getattr(self, key)
@@ -307,6 +313,9 @@ class SampleSettings(_Section):
     clearance: float | None = Field(
         None, ge=0, description="gap left between grains and walls at the deposit [m] "
         "(default: one point spacing)")
+    seeding: Literal["lattice", "rings"] = Field(
+        "lattice", description="material points of the grains: grid-aligned lattice or "
+        "concentric rings (see [[bodies]] seeding)")
 
 
 class ProtocolSettings(_Section):
@@ -430,6 +439,8 @@ class Case(_Section):
             if table["name"] in names:
                 return [Problem(("bodies",), table["name"],
                                 "this name is taken by a generated [sample] body; rename it")]
+            if table["shape"] == "disk":
+                table["seeding"] = sample.seeding
             body = Body(**table)
             body._generated = True
             self.bodies.append(body)

@@ -2,12 +2,18 @@
 
 Mass overlap flags a contact node about one cell before the surfaces touch. At each contact
 node X with normal n (from β into α), the boundaries of the two bodies along n are estimated
-from their material points near the node (within the stencil reach, in the spirit of Nairn's
-separation check), each point standing for a square cell of side δ = h/n_pc:
-    s_α = min_{p∈α near X} (x_p·n) − ½δ‖n‖₁,     s_β = max_{p∈β near X} (x_p·n) + ½δ‖n‖₁,
+from their material points in a column through the node along n (within the stencil reach of
+X and at most δ from the line X + s n, in the spirit of Nairn's separation check), each point
+standing for a square cell of side δ = h/n_pc:
+    s_α = min_{p∈α in column} (x_p·n) − ½δ‖n‖₁,     s_β = max_{p∈β in column} (x_p·n) + ½δ‖n‖₁,
     g = max(0, s_α − s_β).
-An estimated overlap (s_α < s_β) is clipped to g = 0 (never removed in one step). The
-contact law then acts on w̃_n = w_n + g/Δt: the bodies may close the gap, not cross it.
+The column, not the whole ball around X, is what makes the gap right beside a curved
+boundary: over a ball of radius r the minimum takes the surface at a lateral offset up to r,
+x r / R lower at a distance x from the apex of a disk of radius R (a Hertz contact then
+spread over the whole band where the bodies share nodes). A body with no point in the column
+falls back to the ball. An estimated overlap (s_α < s_β) is clipped to g = 0 (never removed
+in one step). The contact law then acts on w̃_n = w_n + g/Δt: the bodies may close the gap,
+not cross it.
 """
 
 from __future__ import annotations
@@ -23,7 +29,8 @@ def boundary_gaps(lattice: Lattice, contacts: ContactNodes, points: dict[int, np
                   spacing: float, reach: float) -> np.ndarray:
     """g ≥ 0 per contact; ``points`` maps body index → its point positions (start of step).
 
-    ``reach``: radius around the node where points count (the stencil's reach).
+    ``reach``: radius around the node where points count (the stencil's reach);
+    ``spacing``: the points' spacing δ, also the half-width of the column along n.
     """
     gaps = np.zeros(len(contacts))
     if len(contacts) == 0:
@@ -34,11 +41,24 @@ def boundary_gaps(lattice: Lattice, contacts: ContactNodes, points: dict[int, np
     for c in range(len(contacts)):
         n = contacts.normal[c]
         half = 0.5 * spacing * np.abs(n).sum()
-        pa = near[contacts.alpha[c]][c]
-        pb = near[contacts.beta[c]][c]
-        if not pa or not pb:
+        xa = _column(points[contacts.alpha[c]], near[contacts.alpha[c]][c], X[c], n, spacing)
+        xb = _column(points[contacts.beta[c]], near[contacts.beta[c]][c], X[c], n, spacing)
+        if xa is None or xb is None:
             continue
-        s_alpha = (points[contacts.alpha[c]][pa] @ n).min() - half
-        s_beta = (points[contacts.beta[c]][pb] @ n).max() + half
+        s_alpha = (xa @ n).min() - half
+        s_beta = (xb @ n).max() + half
         gaps[c] = max(0.0, s_alpha - s_beta)
     return gaps
+
+
+def _column(x: np.ndarray, near: list[int], node: np.ndarray, n: np.ndarray,
+            width: float) -> np.ndarray | None:
+    """Positions of the points in ``near`` whose distance to the line node + s n is at most
+    ``width`` (all of ``near`` if none is; None if ``near`` is empty)."""
+    if not near:
+        return None
+    xs = x[near]
+    r = xs - node
+    lateral = r - np.outer(r @ n, n)
+    inside = np.einsum("ij,ij->i", lateral, lateral) <= width * width
+    return xs[inside] if inside.any() else xs

@@ -51,3 +51,22 @@ def contact_rows(model, state, records: dict[str, np.ndarray]) -> list[dict[str,
                      "ft": records["ft"][k],
                      "status": STATUS_NAMES.get(int(records["status"][k]), "open")})
     return rows
+
+
+def contact_patch(records: dict[str, np.ndarray], body: int) -> tuple[float, np.ndarray, float]:
+    """Load, centre and half-width of the contact patch of ``body`` (one patch assumed):
+
+        F = Σ f_n,I,   x_c = Σ f_n,I x_I / F,   a = 2 √(Σ f_n,I ‖x_I − x_c‖² / F)
+
+    over its contacts (f_n ≥ 0 from the records). a is the half-width of a Hertz (elliptic)
+    pressure distribution with the same second moment (VALIDATION.md B8)."""
+    on = (records["alpha"] == body) | (records["beta"] == body)
+    f = np.maximum(records["fn"][on], 0.0)
+    load = float(f.sum())
+    d = records["position"].shape[1]
+    if load <= 0.0:
+        return 0.0, np.full(d, np.nan), 0.0
+    x = records["position"][on]
+    centre = f @ x / load
+    spread = float(f @ np.sum((x - centre) ** 2, axis=1)) / load
+    return load, centre, 2.0 * np.sqrt(spread)
