@@ -284,6 +284,9 @@ class ContactSettings(_Section):
     pairs: list[FrictionPair] = Field(default_factory=list,
                                       description="friction of named body pairs")
     gap: bool = Field(True, description="act only when the boundaries meet (ALGORITHM.md §4)")
+    overlap_removal: float = Field(
+        0.0, ge=0.0, le=1.0, description="fraction of an estimated overlap between two "
+        "bodies removed per step (0: overlaps are only kept from growing)")
     normal: Literal["difference", "alpha", "beta"] = Field(
         "difference", description="contact normal from the mass gradients of both bodies, "
         "or of α or β alone (exact face normals against kinematic rectangles and disks)")

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from softgrains.contact.detection import ContactNodes, NodalField, find_contact_nodes
-from softgrains.contact.gap import boundary_gaps
+from softgrains.contact.gap import boundary_gaps, effective_gaps
 from softgrains.contact.gauss_seidel import gauss_seidel
 from softgrains.contact.local_law import SLIP, STICK
 from softgrains.errors import SimulationError
@@ -45,6 +45,7 @@ class CouplingSettings:
     max_iterations: int = 2000
     on_failure: str = "stop"
     normal: str = "difference"
+    overlap_removal: float = 0.0  # fraction of an estimated overlap removed per step
 
 
 @dataclass
@@ -151,6 +152,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         return ContactState(contacts, P, status, np.zeros(0)), diag
     gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach)
             if gap_points is not None else np.zeros(n))
+    target = effective_gaps(gaps, settings.overlap_removal)
     mu = np.asarray(friction(contacts.alpha, contacts.beta), float)
     slots = _Slots(steps, contacts)
     wall_va = np.zeros((n, d))
@@ -196,7 +198,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         w_off = np.r_[0, np.cumsum([w.size for w in slots.W])][:-1].astype(np.int64)
         Q[:] = 0.0
         sweeps, _ = gauss_seidel(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
-                                 wall_va, wall_vb, contacts.normal, gaps / dt, mu,
+                                 wall_va, wall_vb, contacts.normal, target / dt, mu,
                                  slots.k_off, w_off, slots.k_size, W, V, Q, P, status,
                                  settings.tolerance, floor, MAX_SWEEPS_PER_ITERATION)
         diag.sweeps += sweeps

@@ -6,14 +6,16 @@ from their material points in a column through the node along n (within the sten
 X and at most δ from the line X + s n, in the spirit of Nairn's separation check), each point
 standing for a square cell of side δ = h/n_pc:
     s_α = min_{p∈α in column} (x_p·n) − ½δ‖n‖₁,     s_β = max_{p∈β in column} (x_p·n) + ½δ‖n‖₁,
-    g = max(0, s_α − s_β).
+    g = s_α − s_β  (< 0: an estimated overlap).
 The column, not the whole ball around X, is what makes the gap right beside a curved
 boundary: over a ball of radius r the minimum takes the surface at a lateral offset up to r,
 x r / R lower at a distance x from the apex of a disk of radius R (a Hertz contact then
 spread over the whole band where the bodies share nodes). A body with no point in the column
-falls back to the ball. An estimated overlap (s_α < s_β) is clipped to g = 0 (never removed
-in one step). The contact law then acts on w̃_n = w_n + g/Δt: the bodies may close the gap,
-not cross it.
+falls back to the ball. The contact law acts on w̃_n = w_n + g̃/Δt with
+    g̃ = g if g ≥ 0,   g̃ = r g if g < 0   (``effective_gaps``, r = contact.overlap_removal):
+the bodies may close a gap, not cross it; an estimated overlap is clipped (r = 0) or removed
+by the fraction r per step (ALGORITHM.md §5: never in one step, so that the correction cannot
+inject energy).
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ from softgrains.grid.lattice import Lattice
 
 def boundary_gaps(lattice: Lattice, contacts: ContactNodes, points: dict[int, np.ndarray],
                   spacing: float, reach: float) -> np.ndarray:
-    """g ≥ 0 per contact; ``points`` maps body index → its point positions (start of step).
+    """g per contact (signed); ``points`` maps body index → its point positions (start of
+    step).
 
     ``reach``: radius around the node where points count (the stencil's reach);
     ``spacing``: the points' spacing δ, also the half-width of the column along n.
@@ -47,8 +50,13 @@ def boundary_gaps(lattice: Lattice, contacts: ContactNodes, points: dict[int, np
             continue
         s_alpha = (xa @ n).min() - half
         s_beta = (xb @ n).max() + half
-        gaps[c] = max(0.0, s_alpha - s_beta)
+        gaps[c] = s_alpha - s_beta
     return gaps
+
+
+def effective_gaps(gaps: np.ndarray, removal: float) -> np.ndarray:
+    """g̃: a gap as it is, an overlap (g < 0) scaled by the removal fraction r ∈ [0, 1]."""
+    return np.where(gaps >= 0.0, gaps, removal * gaps)
 
 
 def _column(x: np.ndarray, near: list[int], node: np.ndarray, n: np.ndarray,
