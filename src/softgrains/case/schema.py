@@ -342,6 +342,11 @@ class OutputSettings(_Section):
     interval: int = Field(10, ge=1, description="steps between rows of series.csv / bodies.csv")
     snapshot_interval: int = Field(100, ge=0, description="steps between snapshots (0 = none)")
     progress: bool = Field(True, description="progress bar on a terminal")
+    checkpoint_interval: int = Field(
+        0, ge=0, description="steps between checkpoints (0 = by wall-clock time only)")
+    checkpoint_minutes: float = Field(
+        10.0, ge=0.0, description="wall-clock minutes between checkpoints (0 = by steps "
+        "only); a checkpoint is also written at the end and when the run is interrupted")
 
 
 class Case(_Section):
