@@ -140,11 +140,23 @@ class Simulation:
         if self.protocol is not None:
             self.protocol.before_step(self.state)
         dt = self.last_dt = self.protocol.time_step() if self.protocol is not None else self.dt
-        dg = self.last_diagnostics = self.solver.step(self.state, dt)
-        if not np.all(np.isfinite(self.state.x)) or not np.all(np.isfinite(self.state.v)):
+        step = self.state.step
+        try:
+            dg = self.last_diagnostics = self.solver.step(self.state, dt)
+        except MemoryError:
             raise SimulationError(
-                f"step {self.state.step}: non-finite positions or velocities; try a smaller "
-                "dt or a finer grid.", step=self.state.step)
+                f"step {step}: out of memory ({self.model.n_points} points); try a larger "
+                "cell_size, fewer points_per_cell or fewer grains.", kind="memory",
+                step=step) from None
+        s = self.state
+        finite = np.isfinite(s.x).all(axis=1) & np.isfinite(s.v).all(axis=1)
+        if not finite.all():
+            p = int(np.flatnonzero(~finite)[0])
+            body = self.model.bodies[int(self.model.body_id[p])]
+            raise SimulationError(
+                f"step {step}: non-finite position or velocity of point "
+                f"{p - body.points.start} of body '{body.name}'; try a smaller dt or a finer "
+                "grid.", kind="nan", step=step, body=body.name, point=p - body.points.start)
         if not dg.contact.converged:
             self.unconverged_contact_steps += 1
         if self.protocol is not None:
