@@ -414,7 +414,8 @@ class Case(_Section):
         if problems:
             return problems
         spacing = grid.cell_size / grid.points_per_cell
-        points = sample.count * math.pi / 4 * (sample.mean_diameter / spacing) ** 2
+        ratio = sample.mean_diameter / spacing  # (a float ** 2 raises OverflowError)
+        points = sample.count * math.pi / 4 * ratio * ratio
         if points > MAX_POINTS:
             message = (f"gives about {points:.3g} material points in the grains, at most "
                        f"{MAX_POINTS:.0e} allowed: fewer or smaller grains, or a larger "
