@@ -11,6 +11,7 @@ is drawn from the seed when the case is loaded), so there is no generator state 
 
 from __future__ import annotations
 
+import copy
 import tomllib
 
 import numba
@@ -44,27 +45,38 @@ def structure(case, model) -> dict[str, object]:
     }
 
 
-def capture(sim, wall_time: float) -> tuple[dict[str, np.ndarray], dict[str, object]]:
-    """(arrays, meta) of a Simulation between two steps."""
+def snapshot(sim) -> tuple[dict[str, np.ndarray], dict[str, object]]:
+    """(arrays, meta): copies of what a Simulation carries between two steps (in memory:
+    the retry of a failed step with a smaller Δt restores it)."""
     s = sim.state
-    arrays = {f"state/{name}": getattr(s, name) for name in STATE_ARRAYS}
+    arrays = {f"state/{name}": getattr(s, name).copy() for name in STATE_ARRAYS}
     if s.contacts is not None:
         for name in CONTACT_NODE_ARRAYS:
-            arrays[f"contacts/{name}"] = getattr(s.contacts.nodes, name)
+            arrays[f"contacts/{name}"] = getattr(s.contacts.nodes, name).copy()
         for name in CONTACT_ARRAYS:
-            arrays[f"contacts/{name}"] = getattr(s.contacts, name)
+            arrays[f"contacts/{name}"] = getattr(s.contacts, name).copy()
     meta = {
         "time": s.time, "step": s.step, "last_dt": sim.last_dt,
         "unconverged_contact_steps": sim.unconverged_contact_steps,
+        "retried_steps": sim.retried_steps,
         "last_row": sim._rows[-1] if sim._rows else None,
-        "protocol": sim.protocol.state_dict() if sim.protocol is not None else None,
-        "protocol_row": sim._protocol_row,
+        "protocol": copy.deepcopy(sim.protocol.state_dict())
+        if sim.protocol is not None else None,
+        "protocol_row": dict(sim._protocol_row),
         "linear_solvers": {st.name: st.solver.use_direct
                            for st in sim.solver.steppers.values()},
+    }
+    return arrays, meta
+
+
+def capture(sim, wall_time: float) -> tuple[dict[str, np.ndarray], dict[str, object]]:
+    """(arrays, meta) of a Simulation between two steps, for a checkpoint file."""
+    arrays, meta = snapshot(sim)
+    meta.update({
         "seed": sim.case.simulation.seed, "threads": numba.get_num_threads(),
         "wall_time_s": wall_time, "structure": structure(sim.case, sim.model),
         "case": case_to_toml(sim.case), "software": software_versions(),
-    }
+    })
     return arrays, meta
 
 
@@ -101,6 +113,7 @@ def restore(sim, arrays: dict[str, np.ndarray], meta: dict[str, object]) -> None
                                            for name in CONTACT_ARRAYS))
     sim.last_dt = float(meta["last_dt"])
     sim.unconverged_contact_steps = int(meta["unconverged_contact_steps"])
+    sim.retried_steps = int(meta.get("retried_steps", 0))
     sim._rows = [meta["last_row"]] if meta["last_row"] is not None else []
     sim._protocol_row = dict(meta["protocol_row"] or {})
     if sim.protocol is not None:

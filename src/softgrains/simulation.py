@@ -46,6 +46,7 @@ from softgrains.observe.stress import von_mises
 from softgrains.protocol import UniaxialCompaction
 from softgrains.solver import Solver, StepDiagnostics
 
+RETRYABLE = {"nan", "inverted", "newton", "contact"}  # failures a smaller Δt may cure
 SERIES_COLUMNS = [
     "step", "time", "dt", "newton_iterations", "contact_iterations", "contact_residual",
     "n_contacts", "kinetic_energy", "strain_energy", "gravity_energy", "total_energy",
@@ -75,6 +76,8 @@ class Simulation:
         self.unconverged_contact_steps = 0
         self.resumed_from: int | None = None  # the checkpoint's step when resumed
         self.checkpoint_step: int | None = None  # the step of the last checkpoint written
+        self.retried_steps = 0  # steps retried with a halved Δt (retry_halvings)
+        self.retry_events: list[str] = []  # their messages, logged by run()
         if case.protocol is not None:
             self.protocol = UniaxialCompaction(case.protocol, self.model, case.layout.width,
                                                case.contact.friction, self.dt)
@@ -136,10 +139,34 @@ class Simulation:
     # -- stepping ----------------------------------------------------------------------
     def step(self) -> StepDiagnostics:
         """One implicit step (the protocol drives the walls first); raises SimulationError
-        on failure."""
+        on failure. With ``simulation.retry_halvings`` > 0 a step that fails in a way a
+        smaller Δt may cure is undone and retried with Δt halved (the step is then shorter;
+        the next one is back to the nominal Δt), each retry noted in ``retry_events``."""
+        retries = self.case.simulation.retry_halvings
+        saved = checkpointing.snapshot(self) if retries else None
+        factor = 1.0
+        while True:
+            try:
+                return self._advance(factor)
+            except SimulationError as error:
+                if not retries or error.diagnosis.get("kind") not in RETRYABLE:
+                    raise
+                rows = self._rows
+                checkpointing.restore(self, *saved)
+                self._rows = rows
+                retries -= 1
+                factor *= 0.5
+                self.retried_steps += 1
+                self.retry_events.append(
+                    f"{str(error).splitlines()[0]}\n  retrying step {self.state.step} with "
+                    f"dt x {factor:g} ([simulation] retry_halvings)")
+
+    def _advance(self, factor: float) -> StepDiagnostics:
+        """The step itself, with the nominal Δt times ``factor``."""
         if self.protocol is not None:
             self.protocol.before_step(self.state)
-        dt = self.last_dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        dt = self.last_dt = dt * factor
         step = self.state.step
         try:
             dg = self.last_diagnostics = self.solver.step(self.state, dt)
@@ -303,6 +330,8 @@ class Simulation:
                     progress.update(k, self.state.time, **self._progress_figures(row))
                 while events and log is not None:
                     log.info("%s", events.pop(0))
+                while self.retry_events and log is not None:
+                    log.warning("%s", self.retry_events.pop(0))
                 if pvd is not None and (k % cfg.snapshot_interval == 0 or last or changed):
                     snapshot()
                 if log is not None and not progress.active and k % log_every == 0:
@@ -401,6 +430,7 @@ class Simulation:
             "point_updates_per_second": self.model.n_points / per_step if per_step > 0 else 0.0,
             "threads": numba.get_num_threads(), "final": last,
             "unconverged_contact_steps": self.unconverged_contact_steps,
+            "retried_steps": self.retried_steps,
             "protocol": self.protocol.summary() if self.protocol is not None else None,
             "software": software_versions(),
         }

@@ -94,3 +94,26 @@ def test_failure_keeps_the_last_good_checkpoint_and_resume_goes_on(tmp_path, cap
     series = read_table(out / "series.csv")
     assert series["step"].tolist() == list(range(21))  # rows 11-14 written once
     assert json.loads((out / "summary.json").read_text())["status"] == "completed"
+
+
+def test_retry_halvings_undoes_a_failed_step_and_retries_it_with_half_the_dt(tmp_path):
+    data = _newton()
+    data["simulation"].update(newton_max_iterations=2, newton_tolerance=1e-10, retry_halvings=4)
+    case = write_case(tmp_path / "case.toml", data)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 0
+    log = (out / "run.log").read_text()
+    assert "did not converge in 2 iterations" in log
+    assert "retrying step 0 with dt x 0.5" in log and "retrying step 0 with dt x 0.25" in log
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["retried_steps"] >= 2
+    series = read_table(out / "series.csv")
+    assert series["dt"][1] == 0.02 / 4 and series["step"].tolist() == list(range(5))
+
+
+def test_a_point_leaving_the_grid_is_not_retried(tmp_path):
+    data = case_dict(FREE_DISK, simulation={"dt": 1.0, "retry_halvings": 3})
+    case = write_case(tmp_path / "case.toml", data)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 3
+    assert json.loads((out / "summary.json").read_text())["retried_steps"] == 0

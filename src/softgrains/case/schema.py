@@ -83,6 +83,9 @@ class SimulationSettings(_Section):
     newton_tolerance: float = Field(1e-8, gt=0.0, lt=1.0, description="relative residual")
     newton_max_iterations: int = Field(25, ge=1, le=200, description="Newton iteration limit")
     linear_solver: Literal["auto", "direct", "cg"] = Field("auto", description="linear solver")
+    retry_halvings: int = Field(
+        0, ge=0, le=10, description="a step that fails (NaN, inverted point, Newton or "
+        "contact not converged) is retried with dt halved, at most this many times (logged)")
     tangent: Literal["projected", "exact"] = Field(
         "projected", description="Newton matrix: per-point tangents made positive "
         "semi-definite (robust under compression) or exact (quadratic convergence)")
