@@ -41,7 +41,7 @@ def start(case: Path, out: Path) -> subprocess.Popen:
 def wait_for_row(process: subprocess.Popen, out: Path, step: int) -> None:
     """Wait until series.csv holds a row at ``step`` or later (a checkpoint is then on disk:
     they are written every 10 steps, rows every 3)."""
-    deadline = time.monotonic() + 60.0
+    deadline = time.monotonic() + 300.0  # a bound for a hang, not a timing assertion
     while time.monotonic() < deadline:
         assert process.poll() is None, f"the run ended before step {step}: {process.stderr}"
         path = out / "series.csv"
@@ -50,7 +50,7 @@ def wait_for_row(process: subprocess.Popen, out: Path, step: int) -> None:
             if any(r.count(",") > 2 and int(r.split(",")[0]) >= step for r in rows[:-1]):
                 return
         time.sleep(0.01)
-    raise AssertionError("no progress within 60 s")
+    raise AssertionError("no progress within 300 s")
 
 
 def assert_same_run(out: Path, reference: Path) -> None:
@@ -96,7 +96,7 @@ def test_sigterm_stops_cleanly_with_a_checkpoint_then_resumes(reference, tmp_pat
     process = start(case, out)
     wait_for_row(process, out, 12)
     process.send_signal(signal.SIGTERM)
-    assert process.wait(timeout=60) == 128 + signal.SIGTERM
+    assert process.wait(timeout=300) == 128 + signal.SIGTERM
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "interrupted" and "SIGTERM" in summary["message"]
     _, meta = read_checkpoint(out / "checkpoint.h5")
