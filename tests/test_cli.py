@@ -85,9 +85,11 @@ def test_run_with_an_invalid_case_exits_2_before_simulating(
     assert "[bodies.0.radius] = -1: must be > 0" in capsys.readouterr().err
 
 
-def test_resume_is_not_implemented_yet(capsys: pytest.CaptureFixture[str]) -> None:
-    assert main(["run", str(EXAMPLE), "--resume"]) == 2
-    assert "resume is not implemented yet" in capsys.readouterr().err
+def test_resume_without_a_checkpoint_exits_2(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["run", str(EXAMPLE), "--out", str(tmp_path), "--resume"]) == 2
+    assert "no checkpoint to resume from" in capsys.readouterr().err
 
 
 def test_plot_of_a_missing_directory_exits_2(

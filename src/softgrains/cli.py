@@ -1,6 +1,7 @@
 """The ``softgrains`` command line: ``run``, ``check``, ``plot`` and ``info``.
 
-Exit statuses: 0 success; 2 invalid case or arguments; 3 the simulation failed.
+Exit statuses: 0 success; 2 invalid case or arguments; 3 the simulation failed; 128 + the
+signal number (130 SIGINT, 143 SIGTERM) when a run was interrupted (after a final checkpoint).
 """
 
 from __future__ import annotations
@@ -65,7 +66,8 @@ def _parser() -> argparse.ArgumentParser:
     run.add_argument(
         "--resume",
         action="store_true",
-        help="continue from DIR/checkpoint.h5 (not implemented yet)",
+        help="continue from DIR/checkpoint.h5 (the case may change e.g. dt or tolerances, "
+        "not its bodies or grid)",
     )
     run.set_defaults(command=_run)
 
@@ -99,13 +101,10 @@ def _parser() -> argparse.ArgumentParser:
 
 def _run(args: argparse.Namespace) -> int:
     """``softgrains run``: load the case(s) (all validated first) and run them."""
-    if args.resume:
-        _error("resume is not implemented yet")
-        return EXIT_INVALID
     cases = [load_case(path, overrides=args.overrides) for path in args.cases]
     if len(cases) == 1:
         out = args.out if args.out is not None else Path("results") / args.cases[0].stem
-        status = _run_one(cases[0], out)
+        status = _run_one(cases[0], out, args.resume)
         if status == EXIT_OK and args.figures:
             _draw([out], None)
         return status
@@ -116,7 +115,7 @@ def _run(args: argparse.Namespace) -> int:
                         "DIR/<file name>; rename them")
     outs = [root / stem for stem in stems]
     jobs = args.jobs or min(len(cases), os.cpu_count() or 1)
-    statuses = _run_parallel(args.cases, args.overrides, outs, max(1, jobs))
+    statuses = _run_parallel(args.cases, args.overrides, outs, max(1, jobs), args.resume)
     done = [out for out, status in zip(outs, statuses, strict=True) if status == EXIT_OK]
     if args.figures:
         # a failed run's rows up to its failure are valid: draw them too when they can be
@@ -130,20 +129,24 @@ def _run(args: argparse.Namespace) -> int:
     return max(statuses)
 
 
-def _run_one(case, out: Path) -> int:
+def _run_one(case, out: Path, resume: bool = False) -> int:
     from softgrains.simulation import Simulation  # heavy: numba kernels
 
+    sim = Simulation(case, out=out)
     try:
-        Simulation(case, out=out).run()
+        summary = sim.run(resume=resume)
     except SimulationError as error:
         _error(f"{error}\nsee {out / 'run.log'}")
         return EXIT_FAILED
+    if summary["status"] == "interrupted":
+        _error(f"{summary['message']}; continue with: softgrains run ... --out {out} --resume")
+        return 128 + (sim.stop_signal or 2)
     print(f"results in {out}")
     return EXIT_OK
 
 
 def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
-                  jobs: int) -> list[int]:
+                  jobs: int, resume: bool = False) -> list[int]:
     """Run the cases in ``jobs`` processes, the cores shared among them (no progress bars:
     each run writes its run.log; one line per case here when it ends)."""
     import multiprocessing
@@ -154,7 +157,7 @@ def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
           f"thread(s) each; logs in {', '.join(str(o / 'run.log') for o in outs)}")
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        futures = [pool.submit(_child_run, str(p), list(overrides), str(o), threads)
+        futures = [pool.submit(_child_run, str(p), list(overrides), str(o), threads, resume)
                    for p, o in zip(paths, outs, strict=True)]
         statuses = []
         for path, out, future in zip(paths, outs, futures, strict=True):
@@ -165,7 +168,8 @@ def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
     return statuses
 
 
-def _child_run(path: str, overrides: list[str], out: str, threads: int) -> tuple[int, str]:
+def _child_run(path: str, overrides: list[str], out: str, threads: int,
+               resume: bool = False) -> tuple[int, str]:
     """One case in a worker process: (exit status, error message)."""
     import numba
 
@@ -175,10 +179,15 @@ def _child_run(path: str, overrides: list[str], out: str, threads: int) -> tuple
     case = load_case(path, overrides=[*overrides, "output.progress=false"])
     if case.simulation.threads == 0:
         case.simulation.threads = threads
+    sim = Simulation(case, out=Path(out))
     try:
-        Simulation(case, out=out).run()
+        summary = sim.run(resume=resume)
     except SimulationError as error:
         return EXIT_FAILED, str(error)
+    except CaseError as error:
+        return EXIT_INVALID, str(error)
+    if summary["status"] == "interrupted":
+        return 128 + (sim.stop_signal or 2), str(summary["message"])
     return EXIT_OK, ""
 
 

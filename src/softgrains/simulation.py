@@ -1,28 +1,39 @@
 """Simulation: Model + State + Solver, the run loop and its observers (ARCHITECTURE.md).
 
 Outputs (INTERFACE.md): case.toml (resolved), series.csv, bodies.csv, snapshots/ (VTK + .pvd),
-summary.json, run.log; rows are flushed as they are written. A SimulationError stops the run
-with a diagnosis in run.log and summary.json (status "failed") and is re-raised (exit 3).
+summary.json, run.log, checkpoint.h5; rows are flushed as they are written. A
+SimulationError stops the run with a diagnosis in run.log and summary.json (status "failed")
+and is re-raised (exit 3); the last good checkpoint stays. SIGINT/SIGTERM stop the run
+between two steps with a final checkpoint (status "interrupted"). ``run(resume=True)``
+continues from ``checkpoint.h5`` (checkpointing.py, docs/reliability.md).
 """
 
 from __future__ import annotations
 
 import math
+import re
 import time as _time
 from pathlib import Path
 
 import numba
 import numpy as np
 
+from softgrains import checkpointing
 from softgrains.case import case_to_toml
-from softgrains.errors import SimulationError
+from softgrains.errors import CaseError, SimulationError
+from softgrains.interrupt import StopRequest
 from softgrains.io import (
+    CHECKPOINT_NAME,
     CsvTable,
     Progress,
     PvdSeries,
     close_run_log,
     open_run_log,
+    read_checkpoint,
+    read_pvd,
     software_versions,
+    truncate_after_step,
+    write_checkpoint,
     write_json_atomic,
     write_points_vtu,
 )
@@ -35,6 +46,7 @@ from softgrains.observe.stress import von_mises
 from softgrains.protocol import UniaxialCompaction
 from softgrains.solver import Solver, StepDiagnostics
 
+RETRYABLE = {"nan", "inverted", "newton", "contact"}  # failures a smaller Δt may cure
 SERIES_COLUMNS = [
     "step", "time", "dt", "newton_iterations", "contact_iterations", "contact_residual",
     "n_contacts", "kinetic_energy", "strain_energy", "gravity_energy", "total_energy",
@@ -62,6 +74,10 @@ class Simulation:
         self.protocol = None
         self._protocol_row: dict[str, object] = {}
         self.unconverged_contact_steps = 0
+        self.resumed_from: int | None = None  # the checkpoint's step when resumed
+        self.checkpoint_step: int | None = None  # the step of the last checkpoint written
+        self.retried_steps = 0  # steps retried with a halved Δt (retry_halvings)
+        self.retry_events: list[str] = []  # their messages, logged by run()
         if case.protocol is not None:
             self.protocol = UniaxialCompaction(case.protocol, self.model, case.layout.width,
                                                case.contact.friction, self.dt)
@@ -123,15 +139,51 @@ class Simulation:
     # -- stepping ----------------------------------------------------------------------
     def step(self) -> StepDiagnostics:
         """One implicit step (the protocol drives the walls first); raises SimulationError
-        on failure."""
+        on failure. With ``simulation.retry_halvings`` > 0 a step that fails in a way a
+        smaller Δt may cure is undone and retried with Δt halved (the step is then shorter;
+        the next one is back to the nominal Δt), each retry noted in ``retry_events``."""
+        retries = self.case.simulation.retry_halvings
+        saved = checkpointing.snapshot(self) if retries else None
+        factor = 1.0
+        while True:
+            try:
+                return self._advance(factor)
+            except SimulationError as error:
+                if not retries or error.diagnosis.get("kind") not in RETRYABLE:
+                    raise
+                rows = self._rows
+                checkpointing.restore(self, *saved)
+                self._rows = rows
+                retries -= 1
+                factor *= 0.5
+                self.retried_steps += 1
+                self.retry_events.append(
+                    f"{str(error).splitlines()[0]}\n  retrying step {self.state.step} with "
+                    f"dt x {factor:g} ([simulation] retry_halvings)")
+
+    def _advance(self, factor: float) -> StepDiagnostics:
+        """The step itself, with the nominal Δt times ``factor``."""
         if self.protocol is not None:
             self.protocol.before_step(self.state)
-        dt = self.last_dt = self.protocol.time_step() if self.protocol is not None else self.dt
-        dg = self.last_diagnostics = self.solver.step(self.state, dt)
-        if not np.all(np.isfinite(self.state.x)) or not np.all(np.isfinite(self.state.v)):
+        dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        dt = self.last_dt = dt * factor
+        step = self.state.step
+        try:
+            dg = self.last_diagnostics = self.solver.step(self.state, dt)
+        except MemoryError:
             raise SimulationError(
-                f"step {self.state.step}: non-finite positions or velocities; try a smaller "
-                "dt or a finer grid.", step=self.state.step)
+                f"step {step}: out of memory ({self.model.n_points} points); try a larger "
+                "cell_size, fewer points_per_cell or fewer grains.", kind="memory",
+                step=step) from None
+        s = self.state
+        finite = np.isfinite(s.x).all(axis=1) & np.isfinite(s.v).all(axis=1)
+        if not finite.all():
+            p = int(np.flatnonzero(~finite)[0])
+            body = self.model.bodies[int(self.model.body_id[p])]
+            raise SimulationError(
+                f"step {step}: non-finite position or velocity of point "
+                f"{p - body.points.start} of body '{body.name}'; try a smaller dt or a finer "
+                "grid.", kind="nan", step=step, body=body.name, point=p - body.points.start)
         if not dg.contact.converged:
             self.unconverged_contact_steps += 1
         if self.protocol is not None:
@@ -158,32 +210,63 @@ class Simulation:
         """True when the protocol's stop criterion has been met."""
         return self.protocol is not None and self.protocol.finished
 
-    def run(self) -> dict[str, object]:
-        """Run to the end, writing all outputs when an output folder was given."""
+    # -- checkpoints ---------------------------------------------------------------------
+    def write_checkpoint(self, path: str | Path, wall_time: float = 0.0) -> None:
+        """Write the complete state to ``path`` (HDF5, atomically replaced)."""
+        arrays, meta = checkpointing.capture(self, wall_time)
+        write_checkpoint(path, arrays, meta)
+        self.checkpoint_step = self.state.step
+
+    def resume(self, path: str | Path) -> tuple[dict[str, object], list[str]]:
+        """Restore the state of the checkpoint ``path`` (CaseError if it is missing or from
+        another case); returns its metadata and the case keys that changed since."""
+        arrays, meta = read_checkpoint(path)
+        changes = checkpointing.check_compatible(self, meta, path)
+        checkpointing.restore(self, arrays, meta)
+        self.resumed_from = self.checkpoint_step = self.state.step
+        return meta, changes
+
+    def run(self, resume: bool = False) -> dict[str, object]:
+        """Run to the end, writing all outputs when an output folder was given; with
+        ``resume``, continue from the output folder's checkpoint.h5."""
         out = self.out
         cfg = self.case.output
         log = None
         tables: list[CsvTable] = []
         series = bodies = pvd = None
+        wall_offset, changes = 0.0, []
+        if resume:
+            if out is None:
+                raise CaseError("resume needs the output folder of the run (--out DIR)")
+            meta, changes = self.resume(out / CHECKPOINT_NAME)
+            wall_offset = float(meta.get("wall_time_s", 0.0))
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
             (out / "case.toml").write_text(case_to_toml(self.case))
-            series = CsvTable(out / "series.csv", self.columns)
-            bodies = CsvTable(out / "bodies.csv", body_columns(self.model.dim))
+            (out / (CHECKPOINT_NAME + ".tmp")).unlink(missing_ok=True)
+            series = self._table(out / "series.csv", self.columns, resume)
+            bodies = self._table(out / "bodies.csv", body_columns(self.model.dim), resume)
             tables = [series, bodies]
+            if resume:
+                _drop_outputs_after(out, self.state.step)
             if cfg.snapshot_interval > 0:
                 (out / "snapshots").mkdir(exist_ok=True)
-                pvd = PvdSeries(out / "snapshots" / "points.pvd")
-                contacts_pvd = PvdSeries(out / "snapshots" / "contacts.pvd")
+                pvd = _pvd(out / "snapshots" / "points.pvd", resume)
+                contacts_pvd = _pvd(out / "snapshots" / "contacts.pvd", resume)
         progress = Progress(self.n_steps, enabled=cfg.progress)
         if out is not None:
             log = open_run_log(out, verbose_console=not progress.active)
+            if resume:
+                log.info("resumed from step %d (t = %.9g s) of %s", self.state.step,
+                         self.state.time, out / CHECKPOINT_NAME)
+                for change in changes:
+                    log.warning("case changed since the checkpoint: %s", change)
             log.info("softgrains run: %d bodies, %d points, %d steps of dt = %g s, "
                      "integrator %s", len(self.model.bodies), self.model.n_points,
                      self.n_steps, self.dt, self.model.integrator.kind)
 
         def record(wall):
-            row = self.series_row(wall)
+            row = self.series_row(wall + wall_offset)
             self._rows.append(row)
             if series is not None:
                 series.append(row)
@@ -211,14 +294,23 @@ class Simulation:
                 table.append(row)
             table.close()
 
+        def checkpoint(wall):
+            if out is not None and self.checkpoint_step != self.state.step:
+                self.write_checkpoint(out / CHECKPOINT_NAME, wall + wall_offset)
+                last_checkpoint[0] = _time.perf_counter()
+
         t0 = _time.perf_counter()
+        last_checkpoint = [t0]
         self._t_after_first_step = None
+        self._first_step = self.state.step
         status, message = "completed", ""
         log_every = max(1, self.n_steps // 20)
+        stop = StopRequest()
         try:
-            record(0.0)
-            if pvd is not None:
-                snapshot()
+            if not resume:
+                record(0.0)
+                if pvd is not None:
+                    snapshot()
             events = self.protocol.events if self.protocol is not None else []
             while not self.at_end:
                 phase = self.protocol.phase if self.protocol is not None else None
@@ -238,6 +330,8 @@ class Simulation:
                     progress.update(k, self.state.time, **self._progress_figures(row))
                 while events and log is not None:
                     log.info("%s", events.pop(0))
+                while self.retry_events and log is not None:
+                    log.warning("%s", self.retry_events.pop(0))
                 if pvd is not None and (k % cfg.snapshot_interval == 0 or last or changed):
                     snapshot()
                 if log is not None and not progress.active and k % log_every == 0:
@@ -246,19 +340,38 @@ class Simulation:
                              dg.contact.iterations, wall, self._log_figures())
                 if self.finished:
                     break
-            if self.protocol is not None and not self.protocol.finished and log is not None:
+                if stop.requested:
+                    status = "interrupted"
+                    message = f"stopped by {stop.name} at step {k}"
+                    break
+                minutes = cfg.checkpoint_minutes
+                if ((cfg.checkpoint_interval and k % cfg.checkpoint_interval == 0)
+                        or (minutes and _time.perf_counter() - last_checkpoint[0]
+                            >= 60.0 * minutes)):
+                    checkpoint(wall)
+            if status == "interrupted":
+                if log is not None:
+                    log.warning("%s; continue with --resume", message)
+            elif self.protocol is not None and not self.protocol.finished and log is not None:
                 log.warning("the run reached its end (simulation.end_time / steps) in the %s "
                             "phase before the protocol's stop criterion; raise end_time to "
                             "go further", self.protocol.phase)
+            checkpoint(_time.perf_counter() - t0)
         except SimulationError as err:
             status, message = "failed", str(err)
+            if self.checkpoint_step is not None and out is not None:
+                message += (f"\nthe last good checkpoint (step {self.checkpoint_step}) is "
+                            f"{out / CHECKPOINT_NAME}: change the case (e.g. a smaller dt) "
+                            "and continue with --resume")
+                err.args = (message,)
             if log is not None:
-                log.error("%s", err)
+                log.error("%s", message)
             raise
         except KeyboardInterrupt:
-            status, message = "interrupted", "stopped by the user"
+            status, message = "interrupted", "stopped by the user (no final checkpoint)"
             raise
         finally:
+            stop.restore()
             progress.close()
             for t in tables:
                 t.close()
@@ -271,7 +384,18 @@ class Simulation:
                          self.state.step, wall, summary["first_step_s"] or 0.0,
                          summary["time_per_step_s"], summary["point_updates_per_second"])
                 close_run_log(log)
+        self.stop_signal = stop.signum
         return summary
+
+    def _table(self, path: Path, columns: list[str], resume: bool) -> CsvTable:
+        """A new table, or on resume the existing one cut back to the checkpoint's step."""
+        if not resume or not path.is_file():
+            return CsvTable(path, columns)
+        try:
+            truncate_after_step(path, columns, self.state.step)
+        except ValueError as error:
+            raise CaseError(f"cannot resume: {error}") from None
+        return CsvTable(path, columns, append=True)
 
     def _progress_figures(self, row: dict[str, object]) -> dict[str, object]:
         if self.protocol is None:
@@ -288,7 +412,7 @@ class Simulation:
                 f"Z = {r['coordination']:.2f}")
 
     def _summary(self, status: str, message: str, wall: float) -> dict[str, object]:
-        steps = self.state.step
+        steps = self.state.step - getattr(self, "_first_step", 0)  # in this session
         last = self._rows[-1] if self._rows else {}
         # the first step includes the JIT compilation of the kernels (once per machine)
         first = self._t_after_first_step
@@ -298,12 +422,43 @@ class Simulation:
             later, n_later = wall, steps
         per_step = later / n_later if n_later else math.nan
         return {
-            "status": status, "message": message, "steps": steps, "time": self.state.time,
+            "status": status, "message": message, "steps": self.state.step,
+            "time": self.state.time, "resumed_from_step": self.resumed_from,
+            "last_checkpoint_step": self.checkpoint_step,
             "dt": self.dt, "bodies": len(self.model.bodies), "points": self.model.n_points,
             "wall_time_s": wall, "first_step_s": first, "time_per_step_s": per_step,
             "point_updates_per_second": self.model.n_points / per_step if per_step > 0 else 0.0,
             "threads": numba.get_num_threads(), "final": last,
             "unconverged_contact_steps": self.unconverged_contact_steps,
+            "retried_steps": self.retried_steps,
             "protocol": self.protocol.summary() if self.protocol is not None else None,
             "software": software_versions(),
         }
+
+
+_STEP_IN_NAME = re.compile(r"_(\d+)\.(vtu|csv)$")
+
+
+def _step_of(name: str) -> int:
+    """The step in an output file name such as points_00000120.vtu (-1 if none)."""
+    match = _STEP_IN_NAME.search(str(name))
+    return int(match.group(1)) if match else -1
+
+
+def _drop_outputs_after(out: Path, step: int) -> None:
+    """Delete the snapshot and contact files written after ``step`` (a resumed run writes
+    them again)."""
+    for folder in (out / "snapshots", out / "contacts"):
+        if folder.is_dir():
+            for path in folder.iterdir():
+                if _step_of(path.name) > step:
+                    path.unlink()
+
+
+def _pvd(path: Path, resume: bool) -> PvdSeries:
+    """A new .pvd index, or on resume the existing one without the entries past the
+    checkpoint (their files were deleted by _drop_outputs_after)."""
+    entries = []
+    if resume and path.is_file():
+        entries = [(t, f) for t, f in read_pvd(path) if (path.parent / f).is_file()]
+    return PvdSeries(path, entries)

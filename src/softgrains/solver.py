@@ -102,7 +102,8 @@ class Solver:
                 if contact.gap else None,
                 spacing=model.lattice.h / model.points_per_cell,
                 reach=0.5 * stencil_width(model.shape_kind) * model.lattice.h
-                * np.sqrt(model.dim), warm=state.contacts)
+                * np.sqrt(model.dim), warm=state.contacts,
+                names=[b.name for b in model.bodies])
             state.contacts = diag.contacts
         else:
             for s in steps.values():

@@ -39,6 +39,8 @@ _TYPE_ERRORS = {
 }
 _SYMBOLS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
 _MAX_SHOWN = 60
+MAX_CASE_BYTES = 16 * 2**20
+"""Largest case file read (bytes)."""
 
 
 def load_case(
@@ -62,6 +64,9 @@ def load_case(
         problems = [line for details in error.errors() for line in _describe(details)]
         count = f"{len(problems)} problem{'s' if len(problems) > 1 else ''}"
         raise CaseError(f"invalid {what} ({count}):\n  " + "\n  ".join(problems)) from None
+    except (ArithmeticError, RecursionError) as error:  # a last guard: absurd magnitudes
+        raise CaseError(f"invalid {what}: a value is out of range ({error}); check the "
+                        "magnitudes of sizes, counts and material constants") from None
 
 
 def case_to_toml(case: Case) -> str:
@@ -109,16 +114,24 @@ def summarize(case: Case) -> str:
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
-    """Parse a TOML file, turning every failure into a CaseError."""
+    """Parse a TOML file, turning every failure into a CaseError. At most MAX_CASE_BYTES are
+    read (a case is a few kB; /dev/zero or a huge file must not fill the memory)."""
     try:
         with path.open("rb") as stream:
-            return tomllib.load(stream)
+            raw = stream.read(MAX_CASE_BYTES + 1)
+        if len(raw) > MAX_CASE_BYTES:
+            raise CaseError(f"case file '{path}' is larger than {MAX_CASE_BYTES // 2**20} MiB: "
+                            "not a case file")
+        return tomllib.loads(raw.decode("utf-8"))
     except FileNotFoundError:
         raise CaseError(f"case file not found: '{path}'") from None
     except OSError as error:
         raise CaseError(f"cannot read case file '{path}': {error.strerror or error}") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
         raise CaseError(f"case file '{path}' is not valid TOML: {error}") from None
+    except RecursionError:
+        raise CaseError(f"case file '{path}' is not valid TOML: arrays or tables nested too "
+                        "deeply") from None
 
 
 def _plain(value: object) -> object:
@@ -153,7 +166,7 @@ def _parse_value(text: str) -> object:
     """The TOML value written in ``text``, or ``text`` itself when it is not one TOML value."""
     try:
         parsed = tomllib.loads(f"value = {text}")
-    except tomllib.TOMLDecodeError:
+    except (tomllib.TOMLDecodeError, RecursionError):
         return text
     return parsed["value"] if len(parsed) == 1 else text
 

@@ -83,6 +83,9 @@ class SimulationSettings(_Section):
     newton_tolerance: float = Field(1e-8, gt=0.0, lt=1.0, description="relative residual")
     newton_max_iterations: int = Field(25, ge=1, le=200, description="Newton iteration limit")
     linear_solver: Literal["auto", "direct", "cg"] = Field("auto", description="linear solver")
+    retry_halvings: int = Field(
+        0, ge=0, le=10, description="a step that fails (NaN, inverted point, Newton or "
+        "contact not converged) is retried with dt halved, at most this many times (logged)")
     tangent: Literal["projected", "exact"] = Field(
         "projected", description="Newton matrix: per-point tangents made positive "
         "semi-definite (robust under compression) or exact (quadratic convergence)")
@@ -354,6 +357,11 @@ class OutputSettings(_Section):
     interval: int = Field(10, ge=1, description="steps between rows of series.csv / bodies.csv")
     snapshot_interval: int = Field(100, ge=0, description="steps between snapshots (0 = none)")
     progress: bool = Field(True, description="progress bar on a terminal")
+    checkpoint_interval: int = Field(
+        0, ge=0, description="steps between checkpoints (0 = by wall-clock time only)")
+    checkpoint_minutes: float = Field(
+        10.0, ge=0.0, description="wall-clock minutes between checkpoints (0 = by steps "
+        "only); a checkpoint is also written at the end and when the run is interrupted")
 
 
 class Case(_Section):
@@ -421,7 +429,8 @@ class Case(_Section):
         if problems:
             return problems
         spacing = grid.cell_size / grid.points_per_cell
-        points = sample.count * math.pi / 4 * (sample.mean_diameter / spacing) ** 2
+        ratio = sample.mean_diameter / spacing  # (a float ** 2 raises OverflowError)
+        points = sample.count * math.pi / 4 * ratio * ratio
         if points > MAX_POINTS:
             message = (f"gives about {points:.3g} material points in the grains, at most "
                        f"{MAX_POINTS:.0e} allowed: fewer or smaller grains, or a larger "

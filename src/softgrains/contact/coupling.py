@@ -23,7 +23,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from softgrains.contact.detection import ContactNodes, NodalField, find_contact_nodes
+from softgrains.contact.detection import (
+    ContactNodes,
+    NodalField,
+    find_contact_nodes,
+    node_position,
+)
 from softgrains.contact.gap import boundary_gaps, effective_gaps
 from softgrains.contact.gauss_seidel import gauss_seidel
 from softgrains.contact.local_law import SLIP, STICK
@@ -121,13 +126,15 @@ class _Slots:
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls: dict,
                   settings: CouplingSettings, friction: Callable, step: int, dt: float,
                   gap_points: dict | None = None, spacing: float = 0.0, reach: float = 0.0,
-                  warm: ContactState | None = None) -> tuple[ContactState, ContactDiagnostics]:
+                  warm: ContactState | None = None, names: list[str] | None = None
+                  ) -> tuple[ContactState, ContactDiagnostics]:
     """Run the coupled loop; ``steps`` maps deformable body index → BodyStep (not finished).
 
     ``walls`` maps a kinematic body's index to (prescribed velocity, current shape): exact
     face normals against walls. ``friction(alpha, beta)`` gives μ per contact. With
     ``gap_points`` (body index → start-of-step point positions) the boundary gap of gap.py
-    is used. ``warm``: the previous step's contacts (warm start).
+    is used. ``warm``: the previous step's contacts (warm start). ``names``: body names
+    for the messages.
     """
     contacts = find_contact_nodes(lattice, fields, {b: s for b, (_, s) in walls.items()},
                                   settings.normal)
@@ -203,7 +210,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                  settings.tolerance, floor, MAX_SWEEPS_PER_ITERATION)
         diag.sweeps += sweeps
         _pass_on(steps, slots, Q, move=True)
-        change = float(np.abs(P - P_before).max())
+        changes = np.abs(P - P_before).max(axis=1)
+        change = float(changes.max())
         P_before[:] = P
         diag.iterations = k
         largest = float(np.abs(P).max())
@@ -216,14 +224,21 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             break
     else:
         diag.converged = False
+        c = int(np.argmax(changes))
+        a, b = int(contacts.alpha[c]), int(contacts.beta[c])
+        name_a, name_b = (names[a], names[b]) if names is not None else (a, b)
+        where = ", ".join(f"{x:.6g}" for x in node_position(lattice, contacts.node[c:c + 1])[0])
         diag.message = (
             f"step {step}: the contact loop did not converge in {settings.max_iterations} "
             f"iterations (impulse change {diag.residual:.2e} of the largest impulse, "
-            f"{settings.relation} relation); try a smaller dt, more contact max_iterations"
+            f"{settings.relation} relation; largest change between bodies '{name_a}' and "
+            f"'{name_b}' at the node at ({where})); try a smaller dt, more contact "
+            "max_iterations"
             + (", a looser contact tolerance or local_relation = \"delassus\"."
                if settings.relation == "lumped" else " or a looser contact tolerance."))
         if settings.on_failure == "stop":
-            raise SimulationError(diag.message, step=step)
+            raise SimulationError(diag.message, kind="contact", step=step,
+                                  body=name_a, other=name_b)
     diag.active = int(np.sum(np.any(P != 0.0, axis=1)))
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))

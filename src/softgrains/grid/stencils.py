@@ -36,7 +36,8 @@ def body_stencils(lattice: Lattice, shape_kind: int, x: np.ndarray, body: str = 
         raise SimulationError(
             f"step {step}: point {p} of body '{body}' at {x[p].tolist()} left the grid "
             f"[{lattice.domain_lower.tolist()}, {lattice.domain_upper.tolist()}]; enlarge "
-            "[grid] size/origin or check the loading.", step=step, body=body, point=p)
+            "[grid] size/origin or check the loading.", kind="grid", step=step, body=body,
+            point=p)
     box = NodeBox.of_stencils(base, s)
     nodes = np.empty((n, s**d), dtype=np.int64)
     local_node_indices(base, box.lower, box.strides(), s, nodes)

@@ -409,22 +409,49 @@ class BodyStep:
         iterations itself (limit=False) and may allow a coarser residual ``floor``.
         """
         res, st, name, step = self.result, self.settings, self.stepper.name, self.step
-        if not np.isfinite(self.rnorm) or self.jmin <= 0.0:
-            what = "a non-finite residual" if self.jmin > 0 else "an inverted point (J ≤ 0)"
+        if self.jmin <= 0.0:
+            p, J = self.worst_point(self.u)
             raise SimulationError(
-                f"step {step}: Newton of body '{name}' produced {what} at iteration "
-                f"{res.iterations}; try a smaller dt or a finer grid.",
-                step=step, body=name, residuals=res.residuals + [self.rnorm])
+                f"step {step}: Newton of body '{name}' produced an inverted point (J ≤ 0) at "
+                f"iteration {res.iterations}: point {p} (at {_where(self.pts.x[p])}, J = "
+                f"{J:.3g}); try a smaller dt or a finer grid.", kind="inverted", step=step,
+                body=name, point=p, residuals=res.residuals + [self.rnorm])
+        if not np.isfinite(self.rnorm):
+            bad = ~np.isfinite(self.r).all(axis=1)
+            node, p = self._node_and_point(int(np.argmax(bad)))
+            raise SimulationError(
+                f"step {step}: Newton of body '{name}' produced a non-finite residual (NaN or "
+                f"Inf) at iteration {res.iterations}, first at the node at {_where(node)} "
+                f"(nearest point {p}); check the case for absurd values (gravity, material "
+                "constants, velocities) or try a smaller dt.", kind="nan", step=step,
+                body=name, point=p, residuals=res.residuals + [self.rnorm])
         res.residuals.append(self.rnorm)
         if self.rnorm <= max(st.tolerance * self.r0, self.floor, floor):
             return True
         if limit and res.iterations >= st.max_iterations:
+            node, p = self._node_and_point(int(np.argmax(np.abs(self.r).max(axis=1))))
             raise SimulationError(
                 f"step {step}: Newton of body '{name}' did not converge in "
                 f"{st.max_iterations} iterations (residual {self.rnorm:.3e}, first "
-                f"{self.r0:.3e}); try a smaller dt, more newton_max_iterations or a looser "
-                "newton_tolerance.", step=step, body=name, residuals=res.residuals)
+                f"{self.r0:.3e}; largest at the node at {_where(node)}, nearest point {p}); "
+                "try a smaller dt, more newton_max_iterations or a looser newton_tolerance.",
+                kind="newton", step=step, body=name, point=p, residuals=res.residuals)
         return False
+
+    def _node_and_point(self, row: int) -> tuple[np.ndarray, int]:
+        """Position of active ``row``'s node and the body's point nearest to it."""
+        node = self.stepper.lattice.node_positions(self.box)[self.active[row]]
+        return node, int(np.argmin(np.sum((self.pts.x - node) ** 2, axis=1)))
+
+    def worst_point(self, u: np.ndarray) -> tuple[int, float]:
+        """(index in the body, J) of the point with the smallest or a non-finite J at the
+        iterate u: where a failure is (diagnosis only, plain NumPy)."""
+        self.u_box[self.active] = u
+        grad = np.einsum("pki,pkj->pij", self.u_box[self.nodes], self.dN)
+        J = np.linalg.det((np.eye(self.d) + grad) @ self.F_n)
+        bad = np.flatnonzero(~np.isfinite(J))
+        p = int(bad[0]) if bad.size else int(np.argmin(J))
+        return p, float(J[p])
 
     def solve(self) -> None:
         """Newton iterations without contact, until converged (or a SimulationError)."""
@@ -490,9 +517,18 @@ class BodyStep:
         jmin = grid_to_particles(self.nodes, self.N, self.dN, u_box, v_old, v_new, a_new,
                                  update, params, pts.law, pts.lam, pts.mu, pts.vol0, pts.x,
                                  pts.v, pts.a, pts.F, pts.sigma, pts.vol, self.n_chunks)
-        if jmin <= 0.0:
+        if not jmin > 0.0:
+            J = np.linalg.det(pts.F)
+            bad = np.flatnonzero(~(J > 0.0))
+            p = int(bad[np.argmin(np.nan_to_num(J[bad], nan=-np.inf))]) if bad.size else 0
             raise SimulationError(
                 f"step {self.step}: body '{self.stepper.name}' has an inverted point "
-                f"(J = {jmin:.3e}); try a smaller dt or a finer grid.",
-                step=self.step, body=self.stepper.name)
+                f"after the step: point {p} (at {_where(pts.x[p])}, J = {J[p]:.3e}); try a "
+                "smaller dt or a finer grid.",
+                kind="inverted", step=self.step, body=self.stepper.name, point=p)
         return self.result
+
+
+def _where(x: np.ndarray) -> str:
+    """A position for a message: (0.0123, 0.0456)."""
+    return "(" + ", ".join(f"{c:.6g}" for c in np.asarray(x, float)) + ")"

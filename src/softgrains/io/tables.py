@@ -36,8 +36,9 @@ def _format_value(value: object) -> str:
 class CsvTable:
     """A CSV file with a fixed header; :meth:`append` writes and flushes one row."""
 
-    def __init__(self, path: str | Path, columns: Sequence[str]) -> None:
-        """Create (or truncate) ``path`` and write the header ``columns``."""
+    def __init__(self, path: str | Path, columns: Sequence[str], append: bool = False) -> None:
+        """Create (or truncate) ``path`` and write the header ``columns``; with ``append``,
+        add rows to an existing table with that header (see :func:`truncate_after_step`)."""
         self.columns = list(columns)
         if not self.columns:
             raise ValueError("a CSV table needs at least one column")
@@ -46,9 +47,10 @@ class CsvTable:
             raise ValueError(f"duplicate column names: {', '.join(duplicates)}")
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._file = self.path.open("w", newline="", encoding="utf-8")
+        self._file = self.path.open("a" if append else "w", newline="", encoding="utf-8")
         self._writer = csv.writer(self._file, lineterminator="\n")
-        self._write(self.columns)
+        if not append:
+            self._write(self.columns)
 
     def append(self, row: Mapping[str, object] | Sequence[object]) -> None:
         """Write one row (a mapping keyed by column, or values in column order) and flush."""
@@ -87,6 +89,33 @@ class CsvTable:
         tb: TracebackType | None,
     ) -> None:
         self.close()
+
+
+def truncate_after_step(path: str | Path, columns: Sequence[str], step: int) -> int:
+    """Keep the header and the rows of ``path`` up to ``step`` (column "step"), dropping later
+    rows and an unfinished last line (a run killed while writing): a resumed run appends from
+    there without duplicates. The file is replaced atomically. Returns the rows kept.
+
+    Raises ValueError when the header is not ``columns`` (another case wrote the table).
+    """
+    from softgrains.io.summary import write_bytes_atomic
+
+    path = Path(path)
+    text = path.read_text(encoding="utf-8")
+    if not text.endswith("\n"):
+        text = text[: text.rfind("\n") + 1]
+    lines = text.splitlines(keepends=True)
+    header = next(csv.reader(lines[:1]), [])
+    if header != list(columns):
+        raise ValueError(f"{path}: its columns are not those of this case")
+    where = header.index("step")
+    kept = [lines[0]]
+    for line in lines[1:]:
+        cells = next(csv.reader([line]), [])
+        if len(cells) == len(header) and float(cells[where]) <= step:
+            kept.append(line)
+    write_bytes_atomic(path, "".join(kept).encode("utf-8"))
+    return len(kept) - 1
 
 
 def read_table(path: str | Path) -> dict[str, np.ndarray]:

@@ -159,10 +159,11 @@ def read_points_vtu(
 class PvdSeries:
     """A ``.pvd`` collection of snapshot files, rewritten atomically after each :meth:`add`."""
 
-    def __init__(self, path: str | Path) -> None:
-        """Start an empty collection at ``path`` (replacing any previous one)."""
+    def __init__(self, path: str | Path, entries: list[tuple[float, str]] | None = None) -> None:
+        """Start a collection at ``path`` (replacing any previous one) with ``entries``
+        (default: none; a resumed run passes the entries it keeps)."""
         self.path = Path(path)
-        self.entries: list[tuple[float, str]] = []
+        self.entries: list[tuple[float, str]] = list(entries or [])
         self._write()
 
     def add(self, time: float, vtu_relative_path: str | PurePath) -> None:

@@ -133,6 +133,19 @@ class UniaxialCompaction:
         obs["top_wall_velocity"] = float(state.body_velocity[self.walls["wall_top"], 1])
         return obs, rattlers
 
+    # -- checkpoints ----------------------------------------------------------------------
+    _STATE = ("phase", "finished", "stop_reason", "h0", "phi0", "equilibrium", "events",
+              "_sigma", "_engaged", "_smooth", "_pre_steps", "_t_compaction")
+
+    def state_dict(self) -> dict[str, object]:
+        """What the protocol carries from one step to the next (for a checkpoint)."""
+        return {name: getattr(self, name) for name in self._STATE}
+
+    def load_state_dict(self, values: dict[str, object]) -> None:
+        """Restore :meth:`state_dict`'s values (resume from a checkpoint)."""
+        for name in self._STATE:
+            setattr(self, name, values[name])
+
     def summary(self) -> dict[str, object]:
         s = self.settings
         return {"kind": s.kind, "sigma0": s.sigma0, "phi0": self.phi0, "h0": self.h0,

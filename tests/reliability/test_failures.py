@@ -1,0 +1,119 @@
+"""Failure diagnosis (issue #5): each way a run can fail stops it with exit status 3 and a
+message saying what happened, where (step, body, point or node) and what to try; the last
+good checkpoint stays and a resume with a changed case continues from it."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from reliability_cases import FREE_DISK, case_dict, write_case
+
+from softgrains.cli import main
+from softgrains.io import read_checkpoint, read_table
+
+
+def _two_disks(**contact) -> dict:
+    data = case_dict(FREE_DISK, simulation={"steps": 20}, contact=contact)
+    data["bodies"] = [
+        {"name": "left", "shape": "disk", "center": [0.68, 1.0], "radius": 0.3,
+         "material": "rubber", "velocity": [2.0, 0.0]},
+        {"name": "right", "shape": "disk", "center": [1.32, 1.0], "radius": 0.3,
+         "material": "rubber", "velocity": [-2.0, 0.0]},
+    ]
+    return data
+
+
+def _compressed(law: str, **simulation) -> dict:
+    data = case_dict(FREE_DISK, simulation={"dt": 0.05, "steps": 3, **simulation},
+                     materials={"rubber": {"young": 1e5, "poisson": 0.3, "density": 1000.0,
+                                           "law": law}})
+    data["bodies"][0]["velocity_gradient"] = [[-200.0, 0.0], [0.0, -200.0]]
+    return data
+
+
+def _newton() -> dict:
+    data = case_dict(FREE_DISK, simulation={"dt": 0.02, "newton_max_iterations": 1,
+                                            "newton_tolerance": 1e-12})
+    data["bodies"][0]["velocity_gradient"] = [[-2.0, 0.0], [0.0, -2.0]]
+    return data
+
+
+pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the NaN case overflows
+
+FAILURES = {
+    # kind: (case, fragments the message must hold)
+    "nan": (case_dict(FREE_DISK, gravity={"acceleration": [0.0, -1e308]}),
+            ["step 0", "body 'body0'", "non-finite residual", "nearest point", "absurd"]),
+    "inverted": (_compressed("linear-elastic"),
+                 ["step 0", "body 'body0'", "inverted point (J ≤ 0)", "point ",
+                  "smaller dt or a finer grid"]),
+    "grid": (case_dict(FREE_DISK, simulation={"dt": 1.0}),
+             ["step 2", "point ", "of body 'body0'", "left the grid", "enlarge [grid]"]),
+    "newton": (_newton(),
+               ["step 0", "body 'body0'", "did not converge in 1 iterations", "nearest point",
+                "smaller dt", "looser newton_tolerance"]),
+    "contact": (_two_disks(max_iterations=1, on_failure="stop"),
+                ["step 0", "contact loop did not converge", "'left' and 'right'",
+                 "smaller dt", "looser contact tolerance"]),
+}
+
+
+@pytest.mark.parametrize("kind", FAILURES)
+def test_failure_exits_3_saying_what_where_and_what_to_try(kind, tmp_path, capsys):
+    data, fragments = FAILURES[kind]
+    case = write_case(tmp_path / "case.toml", data)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 3
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    for fragment in fragments:
+        assert fragment in err, fragment
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "failed" and fragments[-1] in summary["message"]
+    assert fragments[-1] in (out / "run.log").read_text()
+
+
+def test_failure_keeps_the_last_good_checkpoint_and_resume_goes_on(tmp_path, capsys):
+    """Two disks meet at step 14, where one contact iteration is not enough; resumed with
+    the default limit the run goes on from the last good checkpoint."""
+    data = _two_disks(max_iterations=1, on_failure="stop")
+    data["simulation"]["dt"] = 5e-3
+    data["bodies"][0]["center"], data["bodies"][1]["center"] = [0.55, 1.0], [1.45, 1.0]
+    data["output"]["checkpoint_interval"] = 5
+    case = write_case(tmp_path / "case.toml", data)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 3
+    err = capsys.readouterr().err
+    assert "step 14: the contact loop" in err
+    assert "last good checkpoint (step 10)" in err and "--resume" in err
+    _, meta = read_checkpoint(out / "checkpoint.h5")
+    assert meta["step"] == 10
+    assert main(["run", str(case), "--out", str(out), "--resume", "--no-figures",
+                 "--set", "contact.max_iterations=2000"]) == 0
+    series = read_table(out / "series.csv")
+    assert series["step"].tolist() == list(range(21))  # rows 11-14 written once
+    assert json.loads((out / "summary.json").read_text())["status"] == "completed"
+
+
+def test_retry_halvings_undoes_a_failed_step_and_retries_it_with_half_the_dt(tmp_path):
+    data = _newton()
+    data["simulation"].update(newton_max_iterations=2, newton_tolerance=1e-10, retry_halvings=4)
+    case = write_case(tmp_path / "case.toml", data)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 0
+    log = (out / "run.log").read_text()
+    assert "did not converge in 2 iterations" in log
+    assert "retrying step 0 with dt x 0.5" in log and "retrying step 0 with dt x 0.25" in log
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "completed" and summary["retried_steps"] >= 2
+    series = read_table(out / "series.csv")
+    assert series["dt"][1] == 0.02 / 4 and series["step"].tolist() == list(range(5))
+
+
+def test_a_point_leaving_the_grid_is_not_retried(tmp_path):
+    data = case_dict(FREE_DISK, simulation={"dt": 1.0, "retry_halvings": 3})
+    case = write_case(tmp_path / "case.toml", data)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 3
+    assert json.loads((out / "summary.json").read_text())["retried_steps"] == 0
