@@ -107,10 +107,13 @@ def restore(sim, arrays: dict[str, np.ndarray], meta: dict[str, object]) -> None
                             f"case needs {target.shape}")
         target[...] = value
     s.time, s.step = float(meta["time"]), int(meta["step"])
-    if "contacts/impulse" in arrays:
-        nodes = ContactNodes(*(arrays[f"contacts/{name}"] for name in CONTACT_NODE_ARRAYS))
-        s.contacts = ContactState(nodes, *(arrays[f"contacts/{name}"]
+    if "contacts/impulse" in arrays:  # copies: a retried step must not change the snapshot
+        nodes = ContactNodes(*(arrays[f"contacts/{name}"].copy()
+                               for name in CONTACT_NODE_ARRAYS))
+        s.contacts = ContactState(nodes, *(arrays[f"contacts/{name}"].copy()
                                            for name in CONTACT_ARRAYS))
+    else:  # no warm start from a failed attempt's contacts
+        s.contacts = None
     sim.last_dt = float(meta["last_dt"])
     sim.unconverged_contact_steps = int(meta["unconverged_contact_steps"])
     sim.retried_steps = int(meta.get("retried_steps", 0))

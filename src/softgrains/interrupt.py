@@ -41,5 +41,6 @@ class StopRequest:
     def restore(self) -> None:
         """Put the previous handlers back (idempotent)."""
         for sig, handler in self._previous.items():
-            signal.signal(sig, handler)
+            # None: the previous handler was not installed from Python
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
         self._previous = {}

@@ -32,6 +32,7 @@ class BodySpec:
     material: str
     points: slice
     shape: Shape
+    seeding: str = "lattice"  # "rings": disk points on concentric rings (geometry/shapes.py)
 
     @property
     def deformable(self) -> bool:
@@ -116,12 +117,17 @@ def build(case) -> tuple[Model, State]:
     start = 0
     for b, body in enumerate(case.bodies):
         shape = make_shape(body)
-        if getattr(body, "seeding", "lattice") == "rings":
-            x, v0 = seed_disk_rings(shape, grid.cell_size / grid.points_per_cell)
+        name = body.name or f"body{b}"
+        if body.seeding == "rings":
+            spacing = grid.cell_size / grid.points_per_cell
+            if body.radius < spacing:
+                raise CaseError(f"[bodies.{b}] ('{name}'): radius {body.radius:g} is below one "
+                                f"point spacing ({spacing:g}) for seeding = 'rings'; make it "
+                                "larger or the grid finer.")
+            x, v0 = seed_disk_rings(shape, spacing)
         else:
             x, v0 = seed_points(shape, lattice.domain_lower, grid.cell_size,
                                 grid.points_per_cell)
-        name = body.name or f"body{b}"
         if len(x) == 0:
             raise CaseError(f"[bodies.{b}] ('{name}'): the shape holds no material point at "
                             f"cell_size {grid.cell_size} and points_per_cell "
@@ -137,7 +143,8 @@ def build(case) -> tuple[Model, State]:
         lams.append(np.full(n, lam))
         mus.append(np.full(n, mu))
         ids.append(np.full(n, b, dtype=np.int64))
-        bodies.append(BodySpec(b, name, body.kind, body.material, slice(start, start + n), shape))
+        bodies.append(BodySpec(b, name, body.kind, body.material, slice(start, start + n), shape,
+                               body.seeding))
         start += n
     x = np.concatenate(xs)
     n = len(x)

@@ -78,6 +78,7 @@ class Simulation:
         self.checkpoint_step: int | None = None  # the step of the last checkpoint written
         self.retried_steps = 0  # steps retried with a halved Δt (retry_halvings)
         self.retry_events: list[str] = []  # their messages, logged by run()
+        self.checkpoint_errors = 0  # checkpoint writes that failed (logged, run goes on)
         if case.protocol is not None:
             self.protocol = UniaxialCompaction(case.protocol, self.model, case.layout.width,
                                                case.contact.friction, self.dt)
@@ -296,8 +297,14 @@ class Simulation:
 
         def checkpoint(wall):
             if out is not None and self.checkpoint_step != self.state.step:
-                self.write_checkpoint(out / CHECKPOINT_NAME, wall + wall_offset)
                 last_checkpoint[0] = _time.perf_counter()
+                try:
+                    self.write_checkpoint(out / CHECKPOINT_NAME, wall + wall_offset)
+                except OSError as error:  # disk full, permissions: the run itself goes on
+                    self.checkpoint_errors += 1
+                    if log is not None:
+                        log.warning("could not write the checkpoint at step %d (%s); the "
+                                    "previous one, if any, is kept", self.state.step, error)
 
         t0 = _time.perf_counter()
         last_checkpoint = [t0]
@@ -359,6 +366,8 @@ class Simulation:
             checkpoint(_time.perf_counter() - t0)
         except SimulationError as err:
             status, message = "failed", str(err)
+            while self.retry_events and log is not None:  # the retries that did not help
+                log.warning("%s", self.retry_events.pop(0))
             if self.checkpoint_step is not None and out is not None:
                 message += (f"\nthe last good checkpoint (step {self.checkpoint_step}) is "
                             f"{out / CHECKPOINT_NAME}: change the case (e.g. a smaller dt) "
@@ -430,6 +439,7 @@ class Simulation:
             "point_updates_per_second": self.model.n_points / per_step if per_step > 0 else 0.0,
             "threads": numba.get_num_threads(), "final": last,
             "unconverged_contact_steps": self.unconverged_contact_steps,
+            "checkpoint_errors": self.checkpoint_errors,
             "retried_steps": self.retried_steps,
             "protocol": self.protocol.summary() if self.protocol is not None else None,
             "software": software_versions(),

@@ -103,7 +103,8 @@ class Solver:
                 spacing=model.lattice.h / model.points_per_cell,
                 reach=0.5 * stencil_width(model.shape_kind) * model.lattice.h
                 * np.sqrt(model.dim), warm=state.contacts,
-                names=[b.name for b in model.bodies])
+                names=[b.name for b in model.bodies],
+                round_bodies={b.index for b in model.bodies if b.seeding == "rings"})
             state.contacts = diag.contacts
         else:
             for s in steps.values():

@@ -52,3 +52,28 @@ def test_three_bodies_at_one_node_give_three_contacts():
     at_node = contacts.node == i + j * LAT.n_nodes[0]
     pairs = sorted(zip(contacts.alpha[at_node], contacts.beta[at_node], strict=True))
     assert pairs == [(0, 1), (0, 2), (1, 2)]
+
+
+@pytest.mark.parametrize("angle", [0.0, 30.0, 45.0])
+@pytest.mark.parametrize("gap", [0.0, 0.3 * H])
+def test_boundary_gap_between_ring_seeded_disks_at_any_angle(angle, gap):
+    """ALGORITHM.md §4: two ring-seeded disks (R = 0.5, D/h = 10) a known distance apart
+    along a line at ``angle``; the gap at the lattice node between them is recovered within
+    0.05 δ. Ring cells are aligned with the radius: a lattice square's half-extent ½δ‖n‖₁
+    would make each disk 0.21 δ larger at 45°."""
+    from softgrains.contact.detection import ContactNodes
+    from softgrains.contact.gap import boundary_gaps
+    from softgrains.geometry import seed_disk_rings
+
+    delta, radius = H / 2, 0.5
+    node = np.array([15, 15]) + 2  # lattice node at (1.5, 1.5) (two padding nodes)
+    X = LAT.node_origin + H * node
+    n = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+    centres = X + (radius + gap / 2) * n, X - (radius + gap / 2) * n
+    points = {b: seed_disk_rings(Disk(c, radius), delta)[0] for b, c in enumerate(centres)}
+    index = np.array([node[0] + LAT.n_nodes[0] * node[1]])
+    contacts = ContactNodes(index, np.array([0]), np.array([1]), n[None, :],
+                            np.zeros(1, np.int64), np.zeros(1, np.int64))
+    reach = H * np.sqrt(2)
+    found = boundary_gaps(LAT, contacts, points, delta, reach, round_bodies={0, 1})[0]
+    assert found == pytest.approx(gap, abs=0.05 * delta)

@@ -68,3 +68,10 @@ def test_ring_seeded_body_carries_its_mass_and_volume():
 def test_rings_only_for_disks():
     with pytest.raises(CaseError, match="seeding"):
         load_case(_case("rectangle", "rings"))
+
+
+def test_ring_seeded_disk_smaller_than_a_point_spacing_is_a_case_error():
+    case = _case("disk", "rings")
+    case["bodies"][0]["radius"] = 0.01  # spacing 0.025
+    with pytest.raises(CaseError, match="radius 0.01 is below one point spacing"):
+        build(load_case(case))

@@ -152,3 +152,18 @@ def test_impossible_samples_are_case_errors(change, expected):
     with pytest.raises(CaseError) as error:
         load_case(case)
     assert expected in str(error.value)
+
+
+def test_restoring_the_protocol_keeps_the_event_list_the_run_loop_holds():
+    """A retried step restores the protocol (checkpointing.restore): the run loop keeps a
+    reference to ``events``, so the list must be refilled, not replaced; and the restored
+    values must not share mutable state with the snapshot."""
+    sim = Simulation(small_compaction())
+    protocol = sim.protocol
+    events = protocol.events
+    saved = protocol.state_dict()
+    saved["events"] = ["pre-compaction done (test)"]
+    protocol.load_state_dict(saved)
+    assert protocol.events is events and events == ["pre-compaction done (test)"]
+    events.append("later")
+    assert saved["events"] == ["pre-compaction done (test)"]

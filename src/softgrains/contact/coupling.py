@@ -126,7 +126,8 @@ class _Slots:
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls: dict,
                   settings: CouplingSettings, friction: Callable, step: int, dt: float,
                   gap_points: dict | None = None, spacing: float = 0.0, reach: float = 0.0,
-                  warm: ContactState | None = None, names: list[str] | None = None
+                  warm: ContactState | None = None, names: list[str] | None = None,
+                  round_bodies: set[int] | frozenset = frozenset()
                   ) -> tuple[ContactState, ContactDiagnostics]:
     """Run the coupled loop; ``steps`` maps deformable body index → BodyStep (not finished).
 
@@ -157,7 +158,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         for s in steps.values():
             s.solve()
         return ContactState(contacts, P, status, np.zeros(0)), diag
-    gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach)
+    gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies)
             if gap_points is not None else np.zeros(n))
     target = effective_gaps(gaps, settings.overlap_removal)
     mu = np.asarray(friction(contacts.alpha, contacts.beta), float)

@@ -4,8 +4,10 @@ Mass overlap flags a contact node about one cell before the surfaces touch. At e
 node X with normal n (from β into α), the boundaries of the two bodies along n are estimated
 from their material points in a column through the node along n (within the stencil reach of
 X and at most δ from the line X + s n, in the spirit of Nairn's separation check), each point
-standing for a square cell of side δ = h/n_pc:
-    s_α = min_{p∈α in column} (x_p·n) − ½δ‖n‖₁,     s_β = max_{p∈β in column} (x_p·n) + ½δ‖n‖₁,
+standing for a cell of side δ = h/n_pc, whose half-extent along n is e = ½δ‖n‖₁ for the
+lattice's axis-aligned squares and e = ½δ for ring cells (aligned with the radius, i.e. with
+n where two round bodies meet):
+    s_α = min_{p∈α in column} (x_p·n) − e_α,     s_β = max_{p∈β in column} (x_p·n) + e_β,
     g = s_α − s_β  (< 0: an estimated overlap).
 The column, not the whole ball around X, is what makes the gap right beside a curved
 boundary: over a ball of radius r the minimum takes the surface at a lateral offset up to r,
@@ -28,12 +30,15 @@ from softgrains.grid.lattice import Lattice
 
 
 def boundary_gaps(lattice: Lattice, contacts: ContactNodes, points: dict[int, np.ndarray],
-                  spacing: float, reach: float) -> np.ndarray:
+                  spacing: float, reach: float,
+                  round_bodies: set[int] | frozenset = frozenset()) -> np.ndarray:
     """g per contact (signed); ``points`` maps body index → its point positions (start of
     step).
 
     ``reach``: radius around the node where points count (the stencil's reach);
-    ``spacing``: the points' spacing δ, also the half-width of the column along n.
+    ``spacing``: the points' spacing δ, also the half-width of the column along n;
+    ``round_bodies``: ring-seeded bodies, whose cells are aligned with the radius (along
+    the contact normal): their half-extent along n is ½δ, not the lattice square's ½δ‖n‖₁.
     """
     gaps = np.zeros(len(contacts))
     if len(contacts) == 0:
@@ -43,20 +48,21 @@ def boundary_gaps(lattice: Lattice, contacts: ContactNodes, points: dict[int, np
     near = {b: trees[b].query_ball_point(X, reach) for b in trees}
     for c in range(len(contacts)):
         n = contacts.normal[c]
-        half = 0.5 * spacing * np.abs(n).sum()
+        square = 0.5 * spacing * np.abs(n).sum()
         xa = _column(points[contacts.alpha[c]], near[contacts.alpha[c]][c], X[c], n, spacing)
         xb = _column(points[contacts.beta[c]], near[contacts.beta[c]][c], X[c], n, spacing)
         if xa is None or xb is None:
             continue
-        s_alpha = (xa @ n).min() - half
-        s_beta = (xb @ n).max() + half
+        alpha, beta = contacts.alpha[c], contacts.beta[c]
+        s_alpha = (xa @ n).min() - (0.5 * spacing if alpha in round_bodies else square)
+        s_beta = (xb @ n).max() + (0.5 * spacing if beta in round_bodies else square)
         gaps[c] = s_alpha - s_beta
     return gaps
 
 
 def effective_gaps(gaps: np.ndarray, removal: float) -> np.ndarray:
     """g̃: a gap as it is, an overlap (g < 0) scaled by the removal fraction r ∈ [0, 1]."""
-    return np.where(gaps >= 0.0, gaps, removal * gaps)
+    return np.where(gaps >= 0.0, gaps, removal * np.fmin(gaps, 0.0))  # NaN → 0
 
 
 def _column(x: np.ndarray, near: list[int], node: np.ndarray, n: np.ndarray,

@@ -17,6 +17,8 @@ compaction starts: v = −wall_speed (reached linearly in wall_speed_ramp second
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from softgrains.observe.compaction import box_stresses, coordination_and_rattlers
@@ -142,9 +144,13 @@ class UniaxialCompaction:
         return {name: getattr(self, name) for name in self._STATE}
 
     def load_state_dict(self, values: dict[str, object]) -> None:
-        """Restore :meth:`state_dict`'s values (resume from a checkpoint)."""
+        """Restore :meth:`state_dict`'s values (resume from a checkpoint, or a retried
+        step). The event list is refilled in place: the run loop holds it."""
         for name in self._STATE:
-            setattr(self, name, values[name])
+            if name == "events":
+                self.events[:] = list(values[name])
+            else:
+                setattr(self, name, copy.deepcopy(values[name]))
 
     def summary(self) -> dict[str, object]:
         s = self.settings
