@@ -44,13 +44,20 @@ def boundary_gaps(lattice: Lattice, contacts: ContactNodes, points: dict[int, np
     if len(contacts) == 0:
         return gaps
     X = node_position(lattice, contacts.node)
-    trees = {b: cKDTree(x) for b, x in points.items()}
-    near = {b: trees[b].query_ball_point(X, reach) for b in trees}
+    # each body's points near its own contact nodes only (not every body at every node)
+    near_alpha, near_beta = [None] * len(contacts), [None] * len(contacts)
+    for b in np.union1d(contacts.alpha, contacts.beta):
+        tree = cKDTree(points[b])
+        for side, near in ((contacts.alpha, near_alpha), (contacts.beta, near_beta)):
+            mine = np.flatnonzero(side == b)
+            if mine.size:
+                for c, found in zip(mine, tree.query_ball_point(X[mine], reach), strict=True):
+                    near[c] = found
     for c in range(len(contacts)):
         n = contacts.normal[c]
         square = 0.5 * spacing * np.abs(n).sum()
-        xa = _column(points[contacts.alpha[c]], near[contacts.alpha[c]][c], X[c], n, spacing)
-        xb = _column(points[contacts.beta[c]], near[contacts.beta[c]][c], X[c], n, spacing)
+        xa = _column(points[contacts.alpha[c]], near_alpha[c], X[c], n, spacing)
+        xb = _column(points[contacts.beta[c]], near_beta[c], X[c], n, spacing)
         if xa is None or xb is None:
             continue
         alpha, beta = contacts.alpha[c], contacts.beta[c]
