@@ -16,16 +16,11 @@ import h5py
 import numpy as np
 
 from softgrains.errors import CaseError
+from softgrains.io.summary import to_json
 
 FORMAT = "softgrains-checkpoint"
 VERSION = 1
 CHECKPOINT_NAME = "checkpoint.h5"
-
-
-def _to_json(obj: object) -> object:
-    if isinstance(obj, np.ndarray | np.generic):
-        return obj.tolist()
-    raise TypeError(f"cannot write a value of type {type(obj).__name__} to a checkpoint")
 
 
 def write_checkpoint(path: str | Path, arrays: dict[str, np.ndarray],
@@ -38,7 +33,7 @@ def write_checkpoint(path: str | Path, arrays: dict[str, np.ndarray],
         with h5py.File(tmp, "w") as f:
             f.attrs["format"] = FORMAT
             f.attrs["version"] = VERSION
-            f.attrs["meta"] = json.dumps(meta, default=_to_json)
+            f.attrs["meta"] = json.dumps(meta, default=to_json)
             for name, array in arrays.items():
                 f.create_dataset(name, data=np.asarray(array))
         with open(tmp, "rb") as f:

@@ -31,7 +31,7 @@ def write_bytes_atomic(path: str | Path, data: bytes) -> None:
         raise
 
 
-def _to_json(obj: object) -> object:
+def to_json(obj: object) -> object:
     """``json.dumps`` fallback for NumPy scalars and arrays and paths."""
     if isinstance(obj, np.ndarray | np.generic):
         return obj.tolist()
@@ -42,7 +42,7 @@ def _to_json(obj: object) -> object:
 
 def write_json_atomic(path: str | Path, obj: object) -> None:
     """Write ``obj`` as indented JSON, atomically; NumPy scalars/arrays become plain values."""
-    text = json.dumps(obj, indent=2, default=_to_json) + "\n"
+    text = json.dumps(obj, indent=2, default=to_json) + "\n"
     write_bytes_atomic(path, text.encode("utf-8"))
 
 
