@@ -79,6 +79,8 @@ class Simulation:
         self.retried_steps = 0  # steps retried with a halved Δt (retry_halvings)
         self.retry_events: list[str] = []  # their messages, logged by run()
         self.checkpoint_errors = 0  # checkpoint writes that failed (logged, run goes on)
+        self.stop_signal: int | None = None  # the signal that stopped run(), if any
+        self._first_step = 0
         if case.protocol is not None:
             self.protocol = UniaxialCompaction(case.protocol, self.model, case.layout.width,
                                                case.contact.friction, self.dt)
@@ -309,7 +311,7 @@ class Simulation:
         t0 = _time.perf_counter()
         last_checkpoint = [t0]
         self._t_after_first_step = None
-        self._first_step = self.state.step
+        self._first_step = self.state.step  # steps before run() (or the resumed ones) excluded
         status, message = "completed", ""
         log_every = max(1, self.n_steps // 20)
         stop = StopRequest()
@@ -421,7 +423,7 @@ class Simulation:
                 f"Z = {r['coordination']:.2f}")
 
     def _summary(self, status: str, message: str, wall: float) -> dict[str, object]:
-        steps = self.state.step - getattr(self, "_first_step", 0)  # in this session
+        steps = self.state.step - self._first_step  # in this run() call
         last = self._rows[-1] if self._rows else {}
         # the first step includes the JIT compilation of the kernels (once per machine)
         first = self._t_after_first_step
