@@ -246,7 +246,8 @@ class Simulation:
         if out is not None:
             out.mkdir(parents=True, exist_ok=True)
             (out / "case.toml").write_text(case_to_toml(self.case))
-            (out / (CHECKPOINT_NAME + ".tmp")).unlink(missing_ok=True)
+            for stale in out.glob(f".{CHECKPOINT_NAME}.*.tmp"):  # a write cut by a kill
+                stale.unlink(missing_ok=True)
             series = self._table(out / "series.csv", self.columns, resume)
             bodies = self._table(out / "bodies.csv", body_columns(self.model.dim), resume)
             tables = [series, bodies]

@@ -8,15 +8,15 @@ renamed over ``checkpoint.h5``: a kill at any moment leaves the last good checkp
 
 from __future__ import annotations
 
+import io
 import json
-import os
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from softgrains.errors import CaseError
-from softgrains.io.summary import to_json
+from softgrains.io.summary import to_json, write_bytes_atomic
 
 FORMAT = "softgrains-checkpoint"
 VERSION = 1
@@ -26,30 +26,16 @@ CHECKPOINT_NAME = "checkpoint.h5"
 def write_checkpoint(path: str | Path, arrays: dict[str, np.ndarray],
                      meta: dict[str, object]) -> None:
     """Write ``arrays`` (name → array; '/' makes groups) and ``meta`` (JSON-able) to
-    ``path`` atomically: a temporary file, fsync, then ``os.replace``."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with h5py.File(tmp, "w") as f:
-            f.attrs["format"] = FORMAT
-            f.attrs["version"] = VERSION
-            f.attrs["meta"] = json.dumps(meta, default=to_json)
-            for name, array in arrays.items():
-                f.create_dataset(name, data=np.asarray(array))
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-    try:  # make the rename itself durable
-        fd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-    except OSError:
-        pass
+    ``path`` atomically: the HDF5 file is built in memory, then written to a temporary file,
+    fsynced and renamed over ``path`` (``write_bytes_atomic``)."""
+    buffer = io.BytesIO()
+    with h5py.File(buffer, "w") as f:
+        f.attrs["format"] = FORMAT
+        f.attrs["version"] = VERSION
+        f.attrs["meta"] = json.dumps(meta, default=to_json)
+        for name, array in arrays.items():
+            f.create_dataset(name, data=np.asarray(array))
+    write_bytes_atomic(path, buffer.getvalue())
 
 
 def read_checkpoint(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, object]]:
