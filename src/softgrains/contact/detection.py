@@ -96,17 +96,29 @@ def node_position(lattice: Lattice, index: np.ndarray) -> np.ndarray:
     return pos
 
 
-def wall_face_normal(shape, x: np.ndarray) -> np.ndarray | None:
-    """Outward unit normal of a rigid wall's shape at the face nearest to each point x.
+def wall_face_normal(shape, x: np.ndarray, hint: np.ndarray | None = None,
+                     reach: float = 0.0) -> np.ndarray | None:
+    """Outward unit normal of a rigid wall's shape at each point x.
 
-    Rectangle: the nearest face's normal; disk: radial. Other shapes: None (the caller keeps
-    the mass-gradient normal).
+    Rectangle: the face facing the other body. With ``hint`` (a direction from the wall
+    towards the other body: minus that body's outward mass gradient), of the faces that x
+    lies outside of or within ``reach`` behind, the one whose normal is closest to the hint;
+    without, the nearest face. (At a corner node the
+    nearest face may be a side the grain cannot touch: the top wall's end against a side
+    wall, which gave the grain two opposite normals at one node and an unbounded pair of
+    self-balancing impulses.) Disk: radial. Other shapes: None (the caller keeps the
+    mass-gradient normal).
     """
     if isinstance(shape, Rectangle):
         lo, hi = np.asarray(shape.lower, float), np.asarray(shape.upper, float)
         d = x.shape[1]
         dist = np.concatenate([np.abs(x - lo), np.abs(x - hi)], axis=1)  # (n, 2d)
         face = np.argmin(dist, axis=1)
+        if hint is not None:
+            outside = np.concatenate([lo - x, x - hi], axis=1)  # signed distance out of face
+            dots = np.concatenate([-hint, hint], axis=1)  # n_face · hint
+            score = np.where(outside >= -reach, dots, -np.inf)
+            face = np.where(np.isfinite(score).any(axis=1), np.argmax(score, axis=1), face)
         normal = np.zeros_like(x)
         normal[np.arange(len(x)), face % d] = np.where(face < d, -1.0, 1.0)
         return normal
@@ -170,13 +182,17 @@ def find_contact_nodes(lattice: Lattice, fields: list[NodalField],
     alpha = np.array([fields[k].body for k in ka], dtype=np.int64)
     beta = np.array([fields[k].body for k in kb], dtype=np.int64)
     local_a, local_b = locals_[a], locals_[b]
+    grad_a, grad_b = g_a[keep], g_b[keep]
     for wall, shape in (walls or {}).items():
         swap = alpha == wall  # make the wall β
         alpha[swap], beta[swap] = beta[swap], wall
         local_a[swap], local_b[swap] = local_b[swap], local_a[swap].copy()
+        grad_a[swap], grad_b[swap] = grad_b[swap], grad_a[swap].copy()
         normal[swap] *= -1.0
         at_wall = beta == wall
-        exact = wall_face_normal(shape, node_position(lattice, ids[a][at_wall]))
+        # the face the grain lies against: the one facing −g^α (α's outward gradient)
+        exact = wall_face_normal(shape, node_position(lattice, ids[a][at_wall]),
+                                 hint=-grad_a[at_wall], reach=lattice.h)
         if exact is not None:
             normal[at_wall] = exact
     return ContactNodes(ids[a], alpha, beta, normal, local_a, local_b)
