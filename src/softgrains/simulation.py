@@ -29,6 +29,7 @@ from softgrains.io import (
     PvdSeries,
     close_run_log,
     open_run_log,
+    peak_memory_mib,
     read_checkpoint,
     read_pvd,
     software_versions,
@@ -392,9 +393,11 @@ class Simulation:
             if out is not None:
                 write_json_atomic(out / "summary.json", summary)
                 log.info("%s after %d steps in %.2f s (first step, with JIT compilation: "
-                         "%.2f s; then %.3g s/step, %.3g point updates/s)", status,
-                         self.state.step, wall, summary["first_step_s"] or 0.0,
-                         summary["time_per_step_s"], summary["point_updates_per_second"])
+                         "%.2f s; then %.3g s/step, %.3g point updates/s; peak memory %s MiB)",
+                         status, self.state.step, wall, summary["first_step_s"] or 0.0,
+                         summary["time_per_step_s"], summary["point_updates_per_second"],
+                         f"{summary['peak_memory_mib']:.0f}"
+                         if summary["peak_memory_mib"] is not None else "?")
                 close_run_log(log)
         self.stop_signal = stop.signum
         return summary
@@ -440,7 +443,8 @@ class Simulation:
             "dt": self.dt, "bodies": len(self.model.bodies), "points": self.model.n_points,
             "wall_time_s": wall, "first_step_s": first, "time_per_step_s": per_step,
             "point_updates_per_second": self.model.n_points / per_step if per_step > 0 else 0.0,
-            "threads": numba.get_num_threads(), "final": last,
+            "threads": numba.get_num_threads(), "peak_memory_mib": peak_memory_mib(),
+            "final": last,
             "unconverged_contact_steps": self.unconverged_contact_steps,
             "checkpoint_errors": self.checkpoint_errors,
             "retried_steps": self.retried_steps,

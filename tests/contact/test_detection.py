@@ -77,3 +77,34 @@ def test_boundary_gap_between_ring_seeded_disks_at_any_angle(angle, gap):
     reach = H * np.sqrt(2)
     found = boundary_gaps(LAT, contacts, points, delta, reach, round_bodies={0, 1})[0]
     assert found == pytest.approx(gap, abs=0.05 * delta)
+
+
+def test_effective_gap_removes_only_the_overlap_beyond_the_tolerance():
+    """g̃ = g (gap), 0 (overlap within t), r (g + t) (deeper overlap), NaN → 0."""
+    from softgrains.contact.gap import effective_gaps
+
+    g = np.array([0.3, 0.0, -0.1, -0.2, -1.0, np.nan])
+    assert np.allclose(effective_gaps(g, 0.0), [0.3, 0.0, 0.0, 0.0, 0.0, 0.0])
+    assert np.allclose(effective_gaps(g, 0.5), [0.3, 0.0, -0.05, -0.1, -0.5, 0.0])
+    assert np.allclose(effective_gaps(g, 0.5, 0.2), [0.3, 0.0, 0.0, 0.0, -0.4, 0.0])
+
+
+def test_a_grain_in_a_box_corner_gets_each_walls_inner_face_normal():
+    """A grain squeezed into the top-right corner of a box whose top wall ends where the right wall
+    begins (the [sample] layout): at every node the top wall's normal is (0, −1) and the right
+    wall's (−1, 0). The nearest face of the top wall to the corner nodes is its end against
+    the right wall, which gave normals (+1, 0) and (−1, 0) at one node: two impulses that
+    cancel on the grain and can grow without bound (seen: a 400 σ0 spike of the wall stress
+    in the frictional compaction)."""
+    W, Y = 2.0, 2.03  # inner corner: the right wall on a node line, the top wall between
+    t = 0.3
+    grain = Rectangle(np.array([W - 0.5, Y - 0.5]), np.array([W - 0.02, Y + 0.02]))
+    top = Rectangle(np.array([0.5, Y]), np.array([W, Y + t]))
+    right = Rectangle(np.array([W, 0.5]), np.array([W + t, Y + t]))
+    fields = [_field(0, grain)[0], _field(1, top)[0], _field(2, right)[0]]
+    contacts = find_contact_nodes(LAT, fields, walls={1: top, 2: right})
+    grain_top = (contacts.alpha == 0) & (contacts.beta == 1)
+    grain_right = (contacts.alpha == 0) & (contacts.beta == 2)
+    assert grain_top.any() and grain_right.any()
+    assert np.allclose(contacts.normal[grain_top], [0.0, -1.0])
+    assert np.allclose(contacts.normal[grain_right], [-1.0, 0.0])

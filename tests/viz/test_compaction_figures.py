@@ -167,6 +167,24 @@ def test_phi_sigma_axes(tmp_path: Path) -> None:
     assert len(ax.get_lines()[0].get_xdata()) == 17
 
 
+def test_phi_sigma_draws_the_covered_area_dotted(tmp_path: Path) -> None:
+    """With a phi_covered column the figure adds a dotted curve per run in its colour."""
+    folder = _make_run(tmp_path / "a", "A", snapshots=0)
+    path = folder / "series.csv"
+    with path.open(newline="") as file:
+        rows = list(csv.reader(file))
+    rows[0].append("phi_covered")
+    for row in rows[1:]:
+        row.append(str(0.97 * float(row[COLUMNS.index("phi")])))
+    with path.open("w", newline="") as file:
+        csv.writer(file).writerows(rows)
+    (ax,) = _phi_sigma_figure([_load_run(folder)]).axes
+    solid, dotted = ax.get_lines()[:2]
+    assert dotted.get_linestyle() == ":" and dotted.get_color() == solid.get_color()
+    assert dotted.get_ydata() == pytest.approx(0.97 * solid.get_ydata())
+    assert "area covered" in [t.get_text() for t in ax.get_legend().get_texts()][1]
+
+
 def test_side_by_side_shares_one_colour_scale(tmp_path: Path) -> None:
     soft = _load_run(_make_run(tmp_path / "soft", "Soft", stiffness=1e4))
     stiff = _load_run(_make_run(tmp_path / "stiff", "Stiff", final_gap=0.8, stiffness=5e4))

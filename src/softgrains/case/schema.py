@@ -290,6 +290,9 @@ class ContactSettings(_Section):
     overlap_removal: float = Field(
         0.0, ge=0.0, le=1.0, description="fraction of an estimated overlap between two "
         "bodies removed per step (0: overlaps are only kept from growing)")
+    overlap_tolerance: float = Field(
+        0.0, ge=0.0, le=10.0, description="estimated overlap, in cells h, that the removal "
+        "leaves alone (only the excess is removed)")
     normal: Literal["difference", "alpha", "beta"] = Field(
         "difference", description="contact normal from the mass gradients of both bodies, "
         "or of α or β alone (exact face normals against kinematic rectangles and disks)")

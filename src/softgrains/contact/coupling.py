@@ -51,6 +51,7 @@ class CouplingSettings:
     on_failure: str = "stop"
     normal: str = "difference"
     overlap_removal: float = 0.0  # fraction of an estimated overlap removed per step
+    overlap_tolerance: float = 0.0  # overlap (in cells h) left alone by the removal
 
 
 @dataclass
@@ -160,7 +161,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         return ContactState(contacts, P, status, np.zeros(0)), diag
     gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies)
             if gap_points is not None else np.zeros(n))
-    target = effective_gaps(gaps, settings.overlap_removal)
+    target = effective_gaps(gaps, settings.overlap_removal,
+                            settings.overlap_tolerance * lattice.h)
     mu = np.asarray(friction(contacts.alpha, contacts.beta), float)
     slots = _Slots(steps, contacts)
     wall_va = np.zeros((n, d))

@@ -14,10 +14,13 @@ boundary: over a ball of radius r the minimum takes the surface at a lateral off
 x r / R lower at a distance x from the apex of a disk of radius R (a Hertz contact then
 spread over the whole band where the bodies share nodes). A body with no point in the column
 falls back to the ball. The contact law acts on w̃_n = w_n + g̃/Δt with
-    g̃ = g if g ≥ 0,   g̃ = r g if g < 0   (``effective_gaps``, r = contact.overlap_removal):
-the bodies may close a gap, not cross it; an estimated overlap is clipped (r = 0) or removed
-by the fraction r per step (ALGORITHM.md §5: never in one step, so that the correction cannot
-inject energy).
+    g̃ = g if g ≥ 0,   g̃ = 0 if −t ≤ g < 0,   g̃ = r (g + t) if g < −t
+(``effective_gaps``; r = contact.overlap_removal, t = contact.overlap_tolerance × h):
+the bodies may close a gap, not cross it; an estimated overlap is clipped (r = 0) or, beyond
+the tolerance t, removed by the fraction r per step (ALGORITHM.md §5: never in one step, so
+that the correction cannot inject energy). The tolerance keeps the removal from acting on
+the estimate's own scatter (a point entering or leaving the column moves g by a fraction of
+δ from one step to the next).
 """
 
 from __future__ import annotations
@@ -67,9 +70,11 @@ def boundary_gaps(lattice: Lattice, contacts: ContactNodes, points: dict[int, np
     return gaps
 
 
-def effective_gaps(gaps: np.ndarray, removal: float) -> np.ndarray:
-    """g̃: a gap as it is, an overlap (g < 0) scaled by the removal fraction r ∈ [0, 1]."""
-    return np.where(gaps >= 0.0, gaps, removal * np.fmin(gaps, 0.0))  # NaN → 0
+def effective_gaps(gaps: np.ndarray, removal: float, tolerance: float = 0.0) -> np.ndarray:
+    """g̃: a gap as it is; an overlap (g < 0) clipped to 0 within the tolerance t ≥ 0 and,
+    beyond it, its excess scaled by the removal fraction r ∈ [0, 1]."""
+    excess = np.fmin(gaps + tolerance, 0.0)  # NaN → 0
+    return np.where(gaps >= 0.0, gaps, removal * excess)
 
 
 def _column(x: np.ndarray, near: list[int], node: np.ndarray, n: np.ndarray,

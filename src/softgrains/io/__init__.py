@@ -2,7 +2,12 @@
 
 from softgrains.io.checkpoint import CHECKPOINT_NAME, read_checkpoint, write_checkpoint
 from softgrains.io.runlog import Progress, close_run_log, open_run_log
-from softgrains.io.summary import software_versions, write_bytes_atomic, write_json_atomic
+from softgrains.io.summary import (
+    peak_memory_mib,
+    software_versions,
+    write_bytes_atomic,
+    write_json_atomic,
+)
 from softgrains.io.tables import CsvTable, read_table, truncate_after_step
 from softgrains.io.vtk import PvdSeries, read_points_vtu, read_pvd, write_points_vtu
 
@@ -17,6 +22,7 @@ __all__ = [
     "read_pvd",
     "read_checkpoint",
     "read_table",
+    "peak_memory_mib",
     "software_versions",
     "truncate_after_step",
     "write_bytes_atomic",

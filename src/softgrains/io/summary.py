@@ -68,3 +68,14 @@ def software_versions() -> dict[str, str]:
     for name in ("numpy", "scipy", "numba"):
         versions[name] = _distribution_version(name)
     return versions
+
+
+def peak_memory_mib() -> float | None:
+    """Peak resident memory of this process so far [MiB] (None where the platform does not
+    say: no ``resource`` module)."""
+    try:
+        import resource
+    except ImportError:  # Windows
+        return None
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / 2**20 if platform.system() == "Darwin" else peak / 2**10  # bytes / KiB

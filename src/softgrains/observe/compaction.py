@@ -6,6 +6,8 @@ positive):
     φ = Σ_grains Σ_p V_p / A_box
     σ_yy = f_top,y / W,      σ_xx = (f_right,x − f_left,x) / (2 g)
     σ^avg = −(1/A_box) Σ_grains Σ_p V_p σ_p        (Cauchy stress, tension positive)
+φ_covered and the overlap fraction: the box area covered by grains (an overlap once) and the
+area where two grains overlap, over A_box, from a raster of the points' cells (coverage.py).
 Coordination over body pairs with at least one contact node with P_n > 0:
     Z = 2 N_gg / N_g,   Z_w = (2 N_gg + N_gw) / N_g,
 rattlers: grains with fewer than 2 force-bearing contacts (grain or wall); Z* = 2 N_gg* / N_g*
@@ -16,10 +18,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from softgrains.observe.coverage import coverage
+
 COMPACTION_COLUMNS = [
-    "phase", "phi", "stress_yy", "stress_xx", "stress_yy_avg", "stress_xx_avg",
-    "stress_mean_avg", "wall_gap", "coordination", "coordination_walls",
-    "coordination_no_rattlers", "rattler_fraction", "top_wall_velocity",
+    "phase", "phi", "phi_covered", "overlap_fraction", "stress_yy", "stress_xx",
+    "stress_yy_avg", "stress_xx_avg", "stress_mean_avg", "wall_gap", "coordination",
+    "coordination_walls", "coordination_no_rattlers", "rattler_fraction", "top_wall_velocity",
 ]
 
 
@@ -29,6 +33,27 @@ def wall_gap(model, state, walls: dict[str, int]) -> float:
     y_bottom = bottom.shape.upper[1] + state.body_offset[bottom.index, 1]
     y_top = top.shape.lower[1] + state.body_offset[top.index, 1]
     return float(y_top - y_bottom)
+
+
+def inner_box(model, state, walls: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Lower-left and upper-right corners of the box between the walls' inner faces."""
+    def face(name: str, upper: bool) -> np.ndarray:
+        body = model.bodies[walls[name]]
+        corner = body.shape.upper if upper else body.shape.lower
+        return np.asarray(corner, float) + state.body_offset[body.index]
+    lower = np.array([face("wall_left", True)[0], face("wall_bottom", True)[1]])
+    upper = np.array([face("wall_right", False)[0], face("wall_top", False)[1]])
+    return lower, upper
+
+
+def packing_coverage(model, state, walls: dict[str, int], grains: np.ndarray
+                     ) -> dict[str, float]:
+    """φ_covered and the overlap fraction of the grains' points (indices ``grains``)."""
+    lower, upper = inner_box(model, state, walls)
+    spacing = model.lattice.h / model.points_per_cell
+    phi, overlap = coverage(state.x[grains], state.F[grains], model.body_id[grains], spacing,
+                            lower, upper)
+    return {"phi_covered": phi, "overlap_fraction": overlap}
 
 
 def box_stresses(model, state, walls: dict[str, int], grains: np.ndarray, width: float,

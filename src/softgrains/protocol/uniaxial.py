@@ -21,7 +21,11 @@ import copy
 
 import numpy as np
 
-from softgrains.observe.compaction import box_stresses, coordination_and_rattlers
+from softgrains.observe.compaction import (
+    box_stresses,
+    coordination_and_rattlers,
+    packing_coverage,
+)
 from softgrains.sample import WALLS
 
 PRECOMPACTION, COMPACTION = "precompaction", "compaction"
@@ -130,6 +134,7 @@ class UniaxialCompaction:
         obs: dict[str, object] = {"phase": self.phase}
         obs.update(box_stresses(self.model, state, self.walls, self.grain_points, self.width,
                                 forces))
+        obs.update(packing_coverage(self.model, state, self.walls, self.grain_points))
         values, rattlers = coordination_and_rattlers(contacts, self.is_grain)
         obs.update(values)
         obs["top_wall_velocity"] = float(state.body_velocity[self.walls["wall_top"], 1])

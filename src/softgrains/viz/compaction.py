@@ -237,15 +237,23 @@ def _state_title(run: _Run, time: float) -> str:
 
 
 def _phi_sigma_figure(runs: Sequence[_Run]) -> Figure:
-    """φ/φ0 against σ_yy/σ0 (log) for the compaction rows, with the φ = 1 limit dashed."""
+    """φ/φ0 against σ_yy/σ0 (log) for the compaction rows, with the φ = 1 limit dashed;
+    where series.csv has ``phi_covered`` (the area covered, an overlap counted once), it is
+    drawn dotted in the run's colour: the distance between the two is the overlap."""
     figure = Figure(figsize=(5.0, 3.8), layout="constrained")
     ax = figure.add_subplot()
     colors = []
+    covered_labelled = False
     for run in runs:
         rows = run.compaction & (run.series["stress_yy"] > 0.0)
         sigma = run.series["stress_yy"][rows] / run.sigma0
         (line,) = ax.plot(sigma, run.series["phi"][rows] / run.phi0, label=run.label)
         colors.append(line.get_color())
+        if "phi_covered" in run.series:
+            ax.plot(sigma, run.series["phi_covered"][rows] / run.phi0, color=line.get_color(),
+                    linestyle=":", linewidth=1.2,
+                    label=None if covered_labelled else "area covered (overlap once)")
+            covered_labelled = True
     limits = [1.0 / run.phi0 for run in runs]
     several = not np.allclose(limits, limits[0], rtol=1e-6)
     for index, (limit, color) in enumerate(zip(limits, colors, strict=True)):
