@@ -4,7 +4,9 @@ With the inner box W × g (g: gap between the inner faces of the bottom and top 
 A_box = W g, and the contact forces f_b each wall received over the step (compression
 positive):
     φ = Σ_grains Σ_p V_p / A_box
-    σ_yy = f_top,y / W,      σ_xx = (f_right,x − f_left,x) / (2 g)
+    σ_yy = f_top,y / W,   σ_yy^bottom = −f_bottom,y / W,   σ_xx = (f_right,x − f_left,x) / (2 g)
+(with friction on the side walls they carry part of the load: σ_yy^bottom < σ_yy, and the
+averaged σ_yy is close to their mean rather than to the top wall's)
     σ^avg = −(1/A_box) Σ_grains Σ_p V_p σ_p        (Cauchy stress, tension positive)
 φ_covered and the overlap fraction: the box area covered by grains (an overlap once) and the
 area where two grains overlap, over A_box, from a raster of the points' cells (coverage.py).
@@ -21,7 +23,8 @@ import numpy as np
 from softgrains.observe.coverage import coverage
 
 COMPACTION_COLUMNS = [
-    "phase", "phi", "phi_covered", "overlap_fraction", "stress_yy", "stress_xx",
+    "phase", "phi", "phi_covered", "overlap_fraction", "stress_yy", "stress_yy_bottom",
+    "stress_xx",
     "stress_yy_avg", "stress_xx_avg", "stress_mean_avg", "wall_gap", "coordination",
     "coordination_walls", "coordination_no_rattlers", "rattler_fraction", "top_wall_velocity",
 ]
@@ -63,11 +66,12 @@ def box_stresses(model, state, walls: dict[str, int], grains: np.ndarray, width:
     area = width * gap
     vol = state.vol[grains]
     mean_sigma = -(vol[:, None, None] * state.sigma[grains]).sum(axis=0) / area
-    f_top = forces[walls["wall_top"]]
+    f_top, f_bottom = forces[walls["wall_top"]], forces[walls["wall_bottom"]]
     f_left, f_right = forces[walls["wall_left"]], forces[walls["wall_right"]]
     return {
         "phi": float(vol.sum() / area),
         "stress_yy": float(f_top[1] / width),
+        "stress_yy_bottom": float(-f_bottom[1] / width),
         "stress_xx": float((f_right[0] - f_left[0]) / (2.0 * gap)),
         "stress_yy_avg": float(mean_sigma[1, 1]),
         "stress_xx_avg": float(mean_sigma[0, 0]),
