@@ -9,15 +9,15 @@ from softgrains.observe.coverage import coverage
 
 def _disk(center, radius, h=0.02):
     x, vol = seed_points(Disk(center=tuple(center), radius=radius), np.zeros(2), h, 2)
-    return x, np.full(len(x), vol), h / 2
+    return x, np.full(len(x), vol)
 
 
 def test_one_body_covers_its_cells_and_has_no_overlap():
     """A lattice disk: its cells tile it, so the covered area is Σ V_p (to the raster's
     resolution) and nothing overlaps."""
-    x, vol, delta = _disk((0.5, 0.5), 0.3)
+    x, vol = _disk((0.5, 0.5), 0.3)
     F = np.tile(np.eye(2), (len(x), 1, 1))
-    phi, overlap = coverage(x, F, np.zeros(len(x)), delta, (0.0, 0.0), (1.0, 1.0))
+    phi, overlap = coverage(x, F, vol, np.zeros(len(x)), (0.0, 0.0), (1.0, 1.0))
     assert phi == pytest.approx(vol.sum(), rel=1e-3)
     assert overlap == 0.0
 
@@ -25,11 +25,11 @@ def test_one_body_covers_its_cells_and_has_no_overlap():
 def test_sheared_and_stretched_cells_keep_their_area():
     """Every cell mapped by the same F (det 1.2, sheared): covered area = det F Σ V_0, and
     the map is one-to-one, so no overlap."""
-    x, vol, delta = _disk((0.0, 0.0), 0.2)
+    x, vol = _disk((0.0, 0.0), 0.2)
     F = np.array([[1.1, 0.3], [0.1, 1.118181818]])  # det = 1.2
     y = x @ F.T + 0.5
     Fs = np.tile(F, (len(x), 1, 1))
-    phi, overlap = coverage(y, Fs, np.zeros(len(x)), delta, (0.0, 0.0), (1.0, 1.0))
+    phi, overlap = coverage(y, Fs, vol, np.zeros(len(x)), (0.0, 0.0), (1.0, 1.0))
     assert phi == pytest.approx(np.linalg.det(F) * vol.sum(), rel=2e-3)
     assert overlap == pytest.approx(0.0, abs=1e-4)
 
@@ -38,12 +38,12 @@ def test_two_overlapping_disks_give_the_lens_area():
     """Two disks of radius R whose centres are d apart overlap on the lens
     A = 2R² acos(d/2R) − (d/2)√(4R² − d²); the covered area counts it once."""
     R, d = 0.2, 0.3
-    x1, v1, delta = _disk((0.35, 0.5), R, h=0.005)
-    x2, v2, _ = _disk((0.35 + d, 0.5), R, h=0.005)
+    x1, v1 = _disk((0.35, 0.5), R, h=0.005)
+    x2, v2 = _disk((0.35 + d, 0.5), R, h=0.005)
     x = np.vstack([x1, x2])
     F = np.tile(np.eye(2), (len(x), 1, 1))
     grain = np.r_[np.zeros(len(x1)), np.ones(len(x2))]
-    phi, overlap = coverage(x, F, grain, delta, (0.0, 0.0), (1.0, 1.0))
+    phi, overlap = coverage(x, F, np.r_[v1, v2], grain, (0.0, 0.0), (1.0, 1.0))
     lens = 2 * R**2 * np.arccos(d / (2 * R)) - 0.5 * d * np.sqrt(4 * R**2 - d**2)
     assert overlap == pytest.approx(lens, rel=0.03)
     assert phi == pytest.approx(v1.sum() + v2.sum() - overlap, rel=1e-3)

@@ -24,9 +24,9 @@ from softgrains.observe.coverage import coverage
 
 COMPACTION_COLUMNS = [
     "phase", "phi", "phi_covered", "overlap_fraction", "stress_yy", "stress_yy_bottom",
-    "stress_xx",
-    "stress_yy_avg", "stress_xx_avg", "stress_mean_avg", "wall_gap", "coordination",
-    "coordination_walls", "coordination_no_rattlers", "rattler_fraction", "top_wall_velocity",
+    "stress_xx", "stress_yy_avg", "stress_xx_avg", "stress_mean_avg", "wall_gap",
+    "coordination", "coordination_walls", "coordination_no_rattlers", "rattler_fraction",
+    "top_wall_velocity",
 ]
 
 
@@ -53,9 +53,8 @@ def packing_coverage(model, state, walls: dict[str, int], grains: np.ndarray
                      ) -> dict[str, float]:
     """φ_covered and the overlap fraction of the grains' points (indices ``grains``)."""
     lower, upper = inner_box(model, state, walls)
-    spacing = model.lattice.h / model.points_per_cell
-    phi, overlap = coverage(state.x[grains], state.F[grains], model.body_id[grains], spacing,
-                            lower, upper)
+    phi, overlap = coverage(state.x[grains], state.F[grains], model.vol0[grains],
+                            model.body_id[grains], lower, upper)
     return {"phi_covered": phi, "overlap_fraction": overlap}
 
 
