@@ -167,17 +167,37 @@ def test_phi_sigma_axes(tmp_path: Path) -> None:
     assert len(ax.get_lines()[0].get_xdata()) == 17
 
 
-def test_phi_sigma_draws_the_covered_area_dotted(tmp_path: Path) -> None:
-    """With a phi_covered column the figure adds a dotted curve per run in its colour."""
-    folder = _make_run(tmp_path / "a", "A", snapshots=0)
+def _add_column(folder: Path, name: str, scale: float, of: str) -> None:
+    """Append column ``name`` = ``scale`` × column ``of`` to a synthetic run's series.csv."""
     path = folder / "series.csv"
     with path.open(newline="") as file:
         rows = list(csv.reader(file))
-    rows[0].append("phi_covered")
+    rows[0].append(name)
     for row in rows[1:]:
-        row.append(str(0.97 * float(row[COLUMNS.index("phi")])))
+        row.append(str(scale * float(row[COLUMNS.index(of)])))
     with path.open("w", newline="") as file:
         csv.writer(file).writerows(rows)
+
+
+def test_phi_sigma_against_the_averaged_stress_when_the_series_has_it(tmp_path: Path) -> None:
+    """A series with stress_yy_avg also gets phi_sigma_average.png, φ/φ0 against it."""
+    folder = _make_run(tmp_path / "a", "A", snapshots=0)
+    _add_column(folder, "stress_yy_avg", 0.8, "stress_yy")
+    paths = plot_compaction([folder], tmp_path / "out")
+    assert [p.name for p in paths] == ["phi_sigma.png", "phi_sigma_average.png",
+                                       "coordination.png"]
+    run = _load_run(folder)
+    (top,) = _phi_sigma_figure([run]).axes
+    (average,) = _phi_sigma_figure([run], "stress_yy_avg").axes
+    assert "sample average" in average.get_xlabel()
+    assert average.get_lines()[0].get_xdata() == pytest.approx(
+        0.8 * top.get_lines()[0].get_xdata())
+
+
+def test_phi_sigma_draws_the_covered_area_dotted(tmp_path: Path) -> None:
+    """With a phi_covered column the figure adds a dotted curve per run in its colour."""
+    folder = _make_run(tmp_path / "a", "A", snapshots=0)
+    _add_column(folder, "phi_covered", 0.97, "phi")
     (ax,) = _phi_sigma_figure([_load_run(folder)]).axes
     solid, dotted = ax.get_lines()[:2]
     assert dotted.get_linestyle() == ":" and dotted.get_color() == solid.get_color()

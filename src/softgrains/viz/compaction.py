@@ -36,6 +36,7 @@ _GIF_SIZE, _GIF_DPI, _GIF_FPS, _GIF_MAX_FRAMES = (4.0, 4.0), 80, 8, 60
 _CLIP_PERCENTILE = 99.0
 _PHI_LABEL = r"$\phi/\phi_0$ [–]"
 _SIGMA_LABEL = r"$\sigma_{yy}/\sigma_0$ [–]"
+_SIGMA_AVG_LABEL = r"$\langle\sigma_{yy}\rangle/\sigma_0$ (sample average) [–]"
 
 
 @dataclass(frozen=True)
@@ -236,17 +237,19 @@ def _state_title(run: _Run, time: float) -> str:
     return rf"$\phi/\phi_0$ = {phi:.3f}, $\sigma_{{yy}}/\sigma_0$ = {sigma:.3g}"
 
 
-def _phi_sigma_figure(runs: Sequence[_Run]) -> Figure:
-    """φ/φ0 against σ_yy/σ0 (log) for the compaction rows, with the φ = 1 limit dashed;
+def _phi_sigma_figure(runs: Sequence[_Run], stress: str = "stress_yy") -> Figure:
+    """φ/φ0 against σ/σ0 (log) for the compaction rows, with the φ = 1 limit dashed;
     where series.csv has ``phi_covered`` (the area covered, an overlap counted once), it is
-    drawn dotted in the run's colour: the distance between the two is the overlap."""
+    drawn dotted in the run's colour: the distance between the two is the overlap.
+    ``stress``: the top wall's σ_yy, or ``stress_yy_avg`` (the sample's volume average,
+    which differs from the top wall's when the side walls carry load by friction)."""
     figure = Figure(figsize=(5.0, 3.8), layout="constrained")
     ax = figure.add_subplot()
     colors = []
     covered_labelled = False
     for run in runs:
-        rows = run.compaction & (run.series["stress_yy"] > 0.0)
-        sigma = run.series["stress_yy"][rows] / run.sigma0
+        rows = run.compaction & (run.series[stress] > 0.0)
+        sigma = run.series[stress][rows] / run.sigma0
         (line,) = ax.plot(sigma, run.series["phi"][rows] / run.phi0, label=run.label)
         colors.append(line.get_color())
         if "phi_covered" in run.series:
@@ -266,7 +269,7 @@ def _phi_sigma_figure(runs: Sequence[_Run]) -> Figure:
                 label=r"$\phi = 1$" if index == 0 else None,
             )
     ax.set_xscale("log")
-    ax.set_xlabel(_SIGMA_LABEL)
+    ax.set_xlabel(_SIGMA_LABEL if stress == "stress_yy" else _SIGMA_AVG_LABEL)
     ax.set_ylabel(_PHI_LABEL)
     ax.grid(True, which="both", linewidth=0.5, alpha=0.3)
     ax.legend(frameon=False)
@@ -368,7 +371,9 @@ def _save(figure: Figure, path: Path, written: list[Path]) -> None:
 def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path) -> list[Path]:
     """Draw the figures of one or more compaction runs into ``out_dir``.
 
-    Writes ``phi_sigma.png`` and ``coordination.png`` (all runs overlaid); for each run with
+    Writes ``phi_sigma.png`` (against the top wall's σ_yy), ``phi_sigma_average.png`` (against
+    the volume-averaged σ_yy, when series.csv has it) and ``coordination.png`` (all runs
+    overlaid); for each run with
     snapshots, ``snapshots.png`` and ``animation.gif`` (``snapshots_<slug>.png`` and
     ``animation_<slug>.gif`` when several runs are given); and ``side_by_side.png`` for the
     first two runs with snapshots. Every run is checked before anything is written (an
@@ -381,6 +386,9 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path) -> list
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     _save(_phi_sigma_figure(runs), out_dir / "phi_sigma.png", written)
+    if all("stress_yy_avg" in run.series for run in runs):
+        _save(_phi_sigma_figure(runs, "stress_yy_avg"), out_dir / "phi_sigma_average.png",
+              written)
     _save(_coordination_figure(runs), out_dir / "coordination.png", written)
 
     several = len(runs) > 1
