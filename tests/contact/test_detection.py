@@ -89,7 +89,8 @@ def test_effective_gap_removes_only_the_overlap_beyond_the_tolerance():
     assert np.allclose(effective_gaps(g, 0.5, 0.2), [0.3, 0.0, 0.0, 0.0, -0.4, 0.0])
 
 
-def test_a_grain_in_a_box_corner_gets_each_walls_inner_face_normal():
+@pytest.mark.parametrize("walls_first", [False, True])
+def test_a_grain_in_a_box_corner_gets_each_walls_inner_face_normal(walls_first):
     """A grain squeezed into the top-right corner of a box whose top wall ends where the right wall
     begins (the [sample] layout): at every node the top wall's normal is (0, −1) and the right
     wall's (−1, 0). The nearest face of the top wall to the corner nodes is its end against
@@ -101,10 +102,12 @@ def test_a_grain_in_a_box_corner_gets_each_walls_inner_face_normal():
     grain = Rectangle(np.array([W - 0.5, Y - 0.5]), np.array([W - 0.02, Y + 0.02]))
     top = Rectangle(np.array([0.5, Y]), np.array([W, Y + t]))
     right = Rectangle(np.array([W, 0.5]), np.array([W + t, Y + t]))
-    fields = [_field(0, grain)[0], _field(1, top)[0], _field(2, right)[0]]
-    contacts = find_contact_nodes(LAT, fields, walls={1: top, 2: right})
-    grain_top = (contacts.alpha == 0) & (contacts.beta == 1)
-    grain_right = (contacts.alpha == 0) & (contacts.beta == 2)
+    g, t_, r = (2, 0, 1) if walls_first else (0, 1, 2)  # body indices
+    shapes = {g: grain, t_: top, r: right}
+    fields = [_field(i, shapes[i])[0] for i in range(3)]
+    contacts = find_contact_nodes(LAT, fields, walls={t_: top, r: right})
+    grain_top = (contacts.alpha == g) & (contacts.beta == t_)
+    grain_right = (contacts.alpha == g) & (contacts.beta == r)
     assert grain_top.any() and grain_right.any()
     assert np.allclose(contacts.normal[grain_top], [0.0, -1.0])
     assert np.allclose(contacts.normal[grain_right], [-1.0, 0.0])

@@ -12,14 +12,31 @@ def _disk(center, radius, h=0.02):
     return x, np.full(len(x), vol)
 
 
-def test_one_body_covers_its_cells_and_has_no_overlap():
-    """A lattice disk: its cells tile it, so the covered area is Σ V_p (to the raster's
-    resolution) and nothing overlaps."""
+def test_cells_that_tile_cover_their_area_once():
+    """A lattice disk cut into two grains along a cell boundary: the cells tile it, so the
+    covered area is Σ V_p (to the raster's resolution) and the two grains, touching along
+    the cut, do not overlap."""
     x, vol = _disk((0.5, 0.5), 0.3)
     F = np.tile(np.eye(2), (len(x), 1, 1))
-    phi, overlap = coverage(x, F, vol, np.zeros(len(x)), (0.0, 0.0), (1.0, 1.0))
+    grain = (x[:, 0] > 0.5).astype(int)
+    order = np.argsort(grain, kind="stable")
+    phi, overlap = coverage(x[order], F, vol, grain[order], (0.0, 0.0), (1.0, 1.0))
     assert phi == pytest.approx(vol.sum(), rel=1e-3)
     assert overlap == 0.0
+
+
+def test_one_cell_filling_the_box_covers_all_of_it():
+    """A box that is not a whole number of pixels: the pixels tile it exactly."""
+    phi, overlap = coverage(np.array([[0.5, 0.5]]), np.eye(2)[None], np.array([1.0]),
+                            np.array([0]), (0.0, 0.0), (1.0, 1.0))
+    assert phi == 1.0 and overlap == 0.0
+
+
+def test_points_not_grouped_by_grain_are_refused():
+    x = np.array([[0.2, 0.5], [0.5, 0.5], [0.8, 0.5]])
+    with pytest.raises(ValueError, match="grouped by grain"):
+        coverage(x, np.tile(np.eye(2), (3, 1, 1)), np.full(3, 0.01), np.array([0, 1, 0]),
+                 (0.0, 0.0), (1.0, 1.0))
 
 
 def test_sheared_and_stretched_cells_keep_their_area():

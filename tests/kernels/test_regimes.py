@@ -25,3 +25,14 @@ def test_fit_finds_the_break_and_slopes_of_a_noisy_two_segment_curve(true_break)
 def test_too_few_samples_is_a_clear_error():
     with pytest.raises(ValueError, match="too few"):
         fit_two_regimes(np.array([10.0, 20.0, 30.0]), np.array([1.0, 1.1, 1.2]))
+
+
+def test_a_straight_line_has_no_spurious_break_at_its_end():
+    """Data that stop at 60 σ0 on one straight line: both slopes stay the line's (the break
+    is searched inside the samples, each side keeping some)."""
+    rng = np.random.default_rng(3)
+    sigma = np.geomspace(5.0, 60.0, 80)
+    phi = 1.0 + 0.15 * np.log10(sigma) + rng.normal(0.0, 0.003, sigma.size)
+    fit = fit_two_regimes(sigma, phi)
+    assert fit.slope_before == pytest.approx(0.15, abs=0.05)
+    assert fit.slope_after == pytest.approx(0.15, abs=0.1)

@@ -102,12 +102,12 @@ def wall_face_normal(shape, x: np.ndarray, hint: np.ndarray | None = None,
 
     Rectangle: the face facing the other body. With ``hint`` (a direction from the wall
     towards the other body: minus that body's outward mass gradient), of the faces that x
-    lies outside of or within ``reach`` behind, the one whose normal is closest to the hint;
-    without, the nearest face. (At a corner node the
-    nearest face may be a side the grain cannot touch: the top wall's end against a side
-    wall, which gave the grain two opposite normals at one node and an unbounded pair of
-    self-balancing impulses.) Disk: radial. Other shapes: None (the caller keeps the
-    mass-gradient normal).
+    lies outside of or within ``reach`` behind (else of all faces), the one whose normal is
+    closest to the hint, the nearer on a tie; without a usable hint, the nearest face. (At a
+    corner node the nearest face may be a side the grain cannot touch: the top wall's end
+    against a side wall, which gave the grain two opposite normals at one node and an
+    unbounded pair of self-balancing impulses.) Disk: radial. Other shapes: None (the caller
+    keeps the mass-gradient normal).
     """
     if isinstance(shape, Rectangle):
         lo, hi = np.asarray(shape.lower, float), np.asarray(shape.upper, float)
@@ -116,9 +116,16 @@ def wall_face_normal(shape, x: np.ndarray, hint: np.ndarray | None = None,
         face = np.argmin(dist, axis=1)
         if hint is not None:
             outside = np.concatenate([lo - x, x - hi], axis=1)  # signed distance out of face
-            dots = np.concatenate([-hint, hint], axis=1)  # n_face · hint
-            score = np.where(outside >= -reach, dots, -np.inf)
-            face = np.where(np.isfinite(score).any(axis=1), np.argmax(score, axis=1), face)
+            length = np.linalg.norm(hint, axis=1, keepdims=True)
+            usable = np.isfinite(length[:, 0]) & (length[:, 0] > 0.0)
+            unit = np.where(usable[:, None], hint / np.where(usable, length[:, 0], 1.0)[:, None],
+                            0.0)
+            dots = np.concatenate([-unit, unit], axis=1)  # n_face · hint, in [−1, 1]
+            # faces the node is outside of (or within reach behind) first, then the best
+            # match; the distance breaks ties
+            scale = float(np.max(dist)) if dist.size else 1.0
+            score = dots - 3.0 * (outside < -reach) - 1e-6 * dist / max(scale, 1e-300)
+            face = np.where(usable, np.argmax(score, axis=1), face)
         normal = np.zeros_like(x)
         normal[np.arange(len(x)), face % d] = np.where(face < d, -1.0, 1.0)
         return normal
@@ -190,9 +197,10 @@ def find_contact_nodes(lattice: Lattice, fields: list[NodalField],
         grad_a[swap], grad_b[swap] = grad_b[swap], grad_a[swap].copy()
         normal[swap] *= -1.0
         at_wall = beta == wall
-        # the face the grain lies against: the one facing −g^α (α's outward gradient)
+        # the face the grain lies against: the one facing −g^α (α's outward gradient); a
+        # node with α's mass lies within the stencil support (≤ 1.5 h) of α's points
         exact = wall_face_normal(shape, node_position(lattice, ids[a][at_wall]),
-                                 hint=-grad_a[at_wall], reach=lattice.h)
+                                 hint=-grad_a[at_wall], reach=2.0 * lattice.h)
         if exact is not None:
             normal[at_wall] = exact
     return ContactNodes(ids[a], alpha, beta, normal, local_a, local_b)

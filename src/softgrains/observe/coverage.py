@@ -23,7 +23,7 @@ PIXELS_PER_SPACING = 4  # raster pixel = δ/4 (δ: the median cell side)
 
 
 @njit(cache=True)
-def _raster(x, F, side, grain, lower, res, nx, ny, covered, last):
+def _raster(x, F, side, grain, lower, px, py, nx, ny, covered, last):
     """Mark every pixel inside each point's cell; ``covered`` counts distinct grains per
     pixel (points must come grouped by grain; ``last`` holds the last grain that marked a
     pixel)."""
@@ -36,15 +36,15 @@ def _raster(x, F, side, grain, lower, res, nx, ny, covered, last):
         # bounding box of the parallelogram: half-extents |F| (s/2, s/2)
         ex = half * (abs(a) + abs(b))
         ey = half * (abs(c) + abs(d))
-        i0 = max(int(np.floor((x[p, 0] - ex - lower[0]) / res)), 0)
-        i1 = min(int(np.floor((x[p, 0] + ex - lower[0]) / res)), nx - 1)
-        j0 = max(int(np.floor((x[p, 1] - ey - lower[1]) / res)), 0)
-        j1 = min(int(np.floor((x[p, 1] + ey - lower[1]) / res)), ny - 1)
+        i0 = max(int(np.floor((x[p, 0] - ex - lower[0]) / px)), 0)
+        i1 = min(int(np.floor((x[p, 0] + ex - lower[0]) / px)), nx - 1)
+        j0 = max(int(np.floor((x[p, 1] - ey - lower[1]) / py)), 0)
+        j1 = min(int(np.floor((x[p, 1] + ey - lower[1]) / py)), ny - 1)
         g = grain[p]
         for i in range(i0, i1 + 1):
-            rx = lower[0] + (i + 0.5) * res - x[p, 0]
+            rx = lower[0] + (i + 0.5) * px - x[p, 0]
             for j in range(j0, j1 + 1):
-                ry = lower[1] + (j + 0.5) * res - x[p, 1]
+                ry = lower[1] + (j + 0.5) * py - x[p, 1]
                 s = (d * rx - b * ry) / det
                 t = (-c * rx + a * ry) / det
                 if abs(s) <= half and abs(t) <= half:
@@ -61,26 +61,17 @@ def coverage(x: np.ndarray, F: np.ndarray, vol0: np.ndarray, grain: np.ndarray,
     if x.shape[1] != 2:
         raise NotImplementedError("the coverage raster is written for 2D")
     side = np.sqrt(np.asarray(vol0, float))
-    res = float(np.median(side)) / PIXELS_PER_SPACING
+    grain = np.asarray(grain).astype(np.int64)
+    if np.count_nonzero(np.diff(grain)) + 1 > np.unique(grain).size:
+        raise ValueError("coverage: the points must come grouped by grain")
+    target = float(np.median(side)) / PIXELS_PER_SPACING
     size = np.asarray(upper, float) - np.asarray(lower, float)
-    nx, ny = (max(int(np.ceil(s / res)), 1) for s in size)
+    # pixels that tile the box exactly (about δ/4 on each axis)
+    nx, ny = (max(int(np.ceil(s / target)), 1) for s in size)
     covered = np.zeros(nx * ny, np.int32)
     last = np.full(nx * ny, -1, np.int64)
-    _raster(x, F, side, grain.astype(np.int64), np.asarray(lower, float), res, nx, ny,
+    _raster(x, F, side, grain, np.asarray(lower, float), size[0] / nx, size[1] / ny, nx, ny,
             covered, last)
-    # pixels sticking out of the box count by the part inside
-    pixel = res * res
-    area = float(size[0] * size[1])
-    inside = _inside_fraction(nx, ny, res, size)
-    phi = float(np.sum((covered >= 1) * inside)) * pixel / area
-    overlap = float(np.sum(np.maximum(covered - 1, 0) * inside)) * pixel / area
+    phi = float(np.count_nonzero(covered)) / covered.size
+    overlap = float(np.sum(np.maximum(covered - 1, 0))) / covered.size
     return phi, overlap
-
-
-def _inside_fraction(nx: int, ny: int, res: float, size: np.ndarray) -> np.ndarray:
-    """Fraction of each pixel inside the box (the last row and column may stick out)."""
-    fx = np.ones(nx)
-    fy = np.ones(ny)
-    fx[-1] = (size[0] - (nx - 1) * res) / res
-    fy[-1] = (size[1] - (ny - 1) * res) / res
-    return np.outer(fx, fy).ravel()

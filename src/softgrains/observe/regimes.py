@@ -24,19 +24,25 @@ class TwoRegimes:
     samples: int
 
 
+MIN_SAMPLES_PER_SEGMENT = 5
+
+
 def fit_two_regimes(stress_ratio: np.ndarray, phi_ratio: np.ndarray, lower: float = 5.0,
                     upper: float = 300.0, breaks: int = 200) -> TwoRegimes:
     """Fit φ/φ0 against log10(σ/σ0) over [lower, upper] σ0 with two joined lines; the break
-    is searched between 1.5 ``lower`` and ``upper``/1.5 (each segment keeps some points)."""
+    is searched over the samples' own range, with at least MIN_SAMPLES_PER_SEGMENT samples
+    on each side."""
     sigma = np.asarray(stress_ratio, float)
     phi = np.asarray(phi_ratio, float)
     keep = (sigma >= lower) & (sigma <= upper) & np.isfinite(phi)
     x, y = np.log10(sigma[keep]), phi[keep]
-    if x.size < 6:
+    k = MIN_SAMPLES_PER_SEGMENT
+    if x.size < 2 * k + 2:
         raise ValueError(f"{x.size} samples between {lower:g} and {upper:g} σ0: too few for "
                          "a two-regime fit")
+    ordered = np.sort(x)
     best = None
-    for xb in np.linspace(np.log10(1.5 * lower), np.log10(upper / 1.5), breaks):
+    for xb in np.linspace(ordered[k], ordered[-k - 1], breaks):
         basis = np.c_[np.ones_like(x), x - xb, np.maximum(x - xb, 0.0)]
         coef = np.linalg.lstsq(basis, y, rcond=None)[0]
         sse = float(np.sum((basis @ coef - y) ** 2))
