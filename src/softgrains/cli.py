@@ -162,7 +162,9 @@ def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
         statuses = []
         for path, out, future in zip(paths, outs, futures, strict=True):
             status, message = future.result()
-            print(f"{path}: {'done' if status == EXIT_OK else 'FAILED'} -> {out}"
+            outcome = ("done" if status == EXIT_OK else "interrupted" if status > 128
+                       else "invalid case" if status == EXIT_INVALID else "FAILED")
+            print(f"{path}: {outcome} -> {out}"
                   + (f"\n  {message}" if message else ""))
             statuses.append(status)
     return statuses
