@@ -30,16 +30,9 @@ COMPACTION_COLUMNS = [
 ]
 
 
-def wall_gap(model, state, walls: dict[str, int]) -> float:
-    """Gap between the inner faces of the bottom and top walls (their current positions)."""
-    bottom, top = model.bodies[walls["wall_bottom"]], model.bodies[walls["wall_top"]]
-    y_bottom = bottom.shape.upper[1] + state.body_offset[bottom.index, 1]
-    y_top = top.shape.lower[1] + state.body_offset[top.index, 1]
-    return float(y_top - y_bottom)
-
-
 def inner_box(model, state, walls: dict[str, int]) -> tuple[np.ndarray, np.ndarray]:
-    """Lower-left and upper-right corners of the box between the walls' inner faces."""
+    """Lower-left and upper-right corners of the box between the walls' inner faces (their
+    current positions)."""
     def face(name: str, upper: bool) -> np.ndarray:
         body = model.bodies[walls[name]]
         corner = body.shape.upper if upper else body.shape.lower
@@ -47,6 +40,12 @@ def inner_box(model, state, walls: dict[str, int]) -> tuple[np.ndarray, np.ndarr
     lower = np.array([face("wall_left", True)[0], face("wall_bottom", True)[1]])
     upper = np.array([face("wall_right", False)[0], face("wall_top", False)[1]])
     return lower, upper
+
+
+def wall_gap(model, state, walls: dict[str, int]) -> float:
+    """Gap between the inner faces of the bottom and top walls."""
+    lower, upper = inner_box(model, state, walls)
+    return float(upper[1] - lower[1])
 
 
 def packing_coverage(model, state, walls: dict[str, int], grains: np.ndarray
