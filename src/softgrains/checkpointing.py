@@ -59,6 +59,8 @@ def snapshot(sim) -> tuple[dict[str, np.ndarray], dict[str, object]]:
         "time": s.time, "step": s.step, "last_dt": sim.last_dt,
         "unconverged_contact_steps": sim.unconverged_contact_steps,
         "retried_steps": sim.retried_steps,
+        "dt_factor": sim.dt_factor, "steps_at_factor": sim.steps_at_factor,
+        "smallest_dt_factor": sim.smallest_dt_factor,
         "last_row": sim._rows[-1] if sim._rows else None,
         "protocol": copy.deepcopy(sim.protocol.state_dict())
         if sim.protocol is not None else None,
@@ -117,6 +119,9 @@ def restore(sim, arrays: dict[str, np.ndarray], meta: dict[str, object]) -> None
     sim.last_dt = float(meta["last_dt"])
     sim.unconverged_contact_steps = int(meta["unconverged_contact_steps"])
     sim.retried_steps = int(meta.get("retried_steps", 0))
+    sim.dt_factor = float(meta.get("dt_factor", 1.0))
+    sim.steps_at_factor = int(meta.get("steps_at_factor", 0))
+    sim.smallest_dt_factor = float(meta.get("smallest_dt_factor", 1.0))
     sim._rows = [meta["last_row"]] if meta["last_row"] is not None else []
     sim._protocol_row = dict(meta["protocol_row"] or {})
     if sim.protocol is not None:

@@ -48,6 +48,7 @@ from softgrains.protocol import UniaxialCompaction
 from softgrains.solver import Solver, StepDiagnostics
 
 RETRYABLE = {"nan", "inverted", "newton", "contact"}  # failures a smaller Δt may cure
+GROW_AFTER_STEPS = 5  # converged steps in a row before the controller doubles Δt again
 SERIES_COLUMNS = [
     "step", "time", "dt", "newton_iterations", "contact_iterations", "contact_residual",
     "n_contacts", "kinetic_energy", "strain_energy", "gravity_energy", "total_energy",
@@ -78,6 +79,9 @@ class Simulation:
         self.resumed_from: int | None = None  # the checkpoint's step when resumed
         self.checkpoint_step: int | None = None  # the step of the last checkpoint written
         self.retried_steps = 0  # steps retried with a halved Δt (retry_halvings)
+        self.dt_factor = 1.0  # the step-size controller's Δt / nominal Δt
+        self.steps_at_factor = 0  # steps converged in a row since dt_factor last changed
+        self.smallest_dt_factor = 1.0
         self.retry_events: list[str] = []  # their messages, logged by run()
         self.checkpoint_errors = 0  # checkpoint writes that failed (logged, run goes on)
         self.stop_signal: int | None = None  # the signal that stopped run(), if any
@@ -143,27 +147,39 @@ class Simulation:
     # -- stepping ----------------------------------------------------------------------
     def step(self) -> StepDiagnostics:
         """One implicit step (the protocol drives the walls first); raises SimulationError
-        on failure. With ``simulation.retry_halvings`` > 0 a step that fails in a way a
-        smaller Δt may cure is undone and retried with Δt halved (the step is then shorter;
-        the next one is back to the nominal Δt), each retry noted in ``retry_events``."""
-        retries = self.case.simulation.retry_halvings
-        saved = checkpointing.snapshot(self) if retries else None
-        factor = 1.0
+        on failure. The step-size controller: a step that fails in a way a smaller Δt may
+        cure is undone and retried with Δt halved, down to the nominal Δt / 2^k with
+        k = ``simulation.retry_halvings``; after ``GROW_AFTER_STEPS`` steps in a row that
+        succeed, Δt is doubled again, up to the nominal Δt. Each change is noted in
+        ``retry_events`` (logged by run()) and counted in summary.json."""
+        halvings = self.case.simulation.retry_halvings
+        saved = checkpointing.snapshot(self) if halvings else None
         while True:
             try:
-                return self._advance(factor)
+                dg = self._advance(self.dt_factor)
             except SimulationError as error:
-                if not retries or error.diagnosis.get("kind") not in RETRYABLE:
+                factor = 0.5 * self.dt_factor
+                if factor < 0.5 ** halvings or error.diagnosis.get("kind") not in RETRYABLE:
                     raise
-                rows = self._rows
-                checkpointing.restore(self, *saved)
-                self._rows = rows
-                retries -= 1
-                factor *= 0.5
-                self.retried_steps += 1
+                rows, retried = self._rows, self.retried_steps + 1
+                smallest = min(self.smallest_dt_factor, factor)
+                checkpointing.restore(self, *saved)  # the state before the failed attempt
+                self._rows, self.retried_steps = rows, retried
+                self.dt_factor, self.steps_at_factor = factor, 0
+                self.smallest_dt_factor = smallest
                 self.retry_events.append(
                     f"{str(error).splitlines()[0]}\n  retrying step {self.state.step} with "
-                    f"dt x {factor:g} ([simulation] retry_halvings)")
+                    f"dt x {self.dt_factor:g} (step-size controller, [simulation] "
+                    "retry_halvings)")
+                continue
+            self.steps_at_factor += 1
+            if self.dt_factor < 1.0 and self.steps_at_factor >= GROW_AFTER_STEPS:
+                self.dt_factor = min(1.0, 2.0 * self.dt_factor)
+                self.steps_at_factor = 0
+                self.retry_events.append(
+                    f"step {self.state.step}: {GROW_AFTER_STEPS} steps converged, dt x "
+                    f"{self.dt_factor:g} from here (step-size controller)")
+            return dg
 
     def _advance(self, factor: float) -> StepDiagnostics:
         """The step itself, with the nominal Δt times ``factor``."""
@@ -448,6 +464,7 @@ class Simulation:
             "unconverged_contact_steps": self.unconverged_contact_steps,
             "checkpoint_errors": self.checkpoint_errors,
             "retried_steps": self.retried_steps,
+            "smallest_dt_factor": self.smallest_dt_factor,
             "protocol": self.protocol.summary() if self.protocol is not None else None,
             "software": software_versions(),
         }

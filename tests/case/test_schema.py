@@ -15,7 +15,7 @@ from softgrains.case.schema import Body, GridSettings
 def test_minimal_case_gets_the_documented_defaults() -> None:
     case = Case.model_validate(minimal_case())
     sim = case.simulation
-    assert (sim.dimension, sim.steps, sim.integrator, sim.theta) == (2, None, "theta", 0.5)
+    assert (sim.dimension, sim.steps, sim.integrator, sim.theta) == (2, None, "theta", 1.0)
     assert (sim.newmark_beta, sim.newmark_gamma, sim.flip) == (0.25, 0.5, 1.0)
     assert (sim.seed, sim.threads, sim.linear_solver) == (0, 0, "auto")
     assert (sim.newton_tolerance, sim.newton_max_iterations) == (1e-8, 25)

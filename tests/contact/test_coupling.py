@@ -13,7 +13,7 @@ def _two_disks(enabled=True, gap=True):
     """Sulsky et al. (1994): two elastic disks on the diagonal of a 1 m square, 20 x 20 cells."""
     disk = {"shape": "disk", "radius": 0.2, "material": "gel"}
     return load_case({
-        "simulation": {"dt": 0.01, "end_time": 3.0},
+        "simulation": {"dt": 0.01, "end_time": 3.0, "theta": 0.5},
         "grid": {"cell_size": 0.05, "origin": [0.0, 0.0], "size": [1.0, 1.0]},
         "materials": {"gel": {"young": 1000.0, "poisson": 0.3, "density": 1000.0}},
         "bodies": [{**disk, "center": [0.2, 0.2], "velocity": [0.1, 0.1]},

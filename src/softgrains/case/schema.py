@@ -71,7 +71,8 @@ class SimulationSettings(_Section):
     end_time: float | None = Field(None, gt=0, description="simulated time [s]; or give steps")
     steps: int | None = Field(None, ge=1, le=MAX_STEPS, description="number of time steps")
     integrator: Literal["theta", "newmark"] = Field("theta", description="time integrator")
-    theta: float = Field(0.5, ge=0.5, le=1.0, description="theta of the Moreau-Jean scheme")
+    theta: float = Field(1.0, ge=0.5, le=1.0, description="theta of the Moreau-Jean scheme "
+                         "(1: dissipative, resting contacts settle; 1/2: energy-conserving)")
     newmark_beta: float = Field(0.25, gt=0.0, le=0.5, description="Newmark beta")
     newmark_gamma: float = Field(0.5, ge=0.5, le=1.0, description="Newmark gamma")
     mass_matrix: Literal["lumped", "consistent"] = Field(
@@ -84,11 +85,15 @@ class SimulationSettings(_Section):
     newton_max_iterations: int = Field(25, ge=1, le=200, description="Newton iteration limit")
     linear_solver: Literal["auto", "direct", "cg"] = Field("auto", description="linear solver")
     retry_halvings: int = Field(
-        0, ge=0, le=10, description="a step that fails (NaN, inverted point, Newton or "
-        "contact not converged) is retried with dt halved, at most this many times (logged)")
-    tangent: Literal["projected", "exact"] = Field(
-        "projected", description="Newton matrix: per-point tangents made positive "
-        "semi-definite (robust under compression) or exact (quadratic convergence)")
+        4, ge=0, le=10, description="step-size controller: a step that fails (NaN, "
+        "inverted point, Newton or contact not converged) is undone and retried with dt "
+        "halved, down to dt / 2^retry_halvings; dt doubles back after 5 converged steps "
+        "(logged; 0: no retry)")
+    tangent: Literal["auto", "projected", "exact"] = Field(
+        "auto", description="Newton matrix: exact (quadratic convergence), per-point "
+        "tangents made positive semi-definite (robust under compression, linear "
+        "convergence), or auto: exact, switching to projected within a step whose "
+        "iterations fail to converge")
 
     @property
     def n_steps(self) -> int:
@@ -299,9 +304,17 @@ class ContactSettings(_Section):
     local_relation: Literal["delassus", "lumped"] = Field(
         "delassus", description="local compliance: Delassus (bodies' Newton matrices) or "
         "lumped nodal masses")
-    tolerance: float = Field(1e-4, gt=0.0, lt=1.0, description="relative impulse change")
-    max_iterations: int = Field(2000, ge=1, le=100000,
-                                description="coupling iterations (Newton + Gauss-Seidel)")
+    tolerance: float = Field(1e-4, gt=0.0, lt=1.0, description="relative complementarity "
+                             "(natural-map) residual of the contacts, and the bodies' residual "
+                             "relative to the largest impulse")
+    max_iterations: int = Field(200, ge=1, le=100000,
+                                description="coupling iterations (a Newton update of the bodies "
+                                "and a complete contact solve each)")
+    solver: Literal["newton", "nsgs"] = Field(
+        "newton", description="contact problem solver: semismooth Newton (Alart-Curnier) or "
+        "nonlinear Gauss-Seidel")
+    solver_iterations: int = Field(50, ge=1, le=100000, description="per contact solve: "
+                                   "Newton iterations or Gauss-Seidel sweeps")
     on_failure: Literal["stop", "warn"] = Field(
         "stop", description="when the loop does not converge: stop the run, or warn, flag "
         "the step in series.csv and go on")

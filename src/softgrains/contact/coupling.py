@@ -30,13 +30,21 @@ from softgrains.contact.detection import (
     node_position,
 )
 from softgrains.contact.gap import boundary_gaps, effective_gaps
-from softgrains.contact.gauss_seidel import gauss_seidel
 from softgrains.contact.local_law import SLIP, STICK
+from softgrains.contact.problem import (
+    ContactProblem,
+    natural_map_residual,
+    residual_norm,
+    row_impulses,
+)
+from softgrains.contact.solvers import ContactSolverOptions, solve
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
 
 IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
-MAX_SWEEPS_PER_ITERATION = 200  # Gauss–Seidel sweeps between two Newton updates
+AUTO_TANGENT_ITERATIONS = 25  # tangent = "auto": projected after this many iterations
+AUTO_TANGENT_FAILED_SOLVES = 2  # ... or after this many unconverged contact solves
+SOLVE_TOLERANCE_FRACTION = 0.1  # each contact solve to this fraction of the loop's tolerance
 
 
 @dataclass(frozen=True)
@@ -47,11 +55,13 @@ class CouplingSettings:
 
     relation: str = "delassus"
     tolerance: float = 1e-4
-    max_iterations: int = 2000
+    max_iterations: int = 200
     on_failure: str = "stop"
     normal: str = "difference"
     overlap_removal: float = 0.0  # fraction of an estimated overlap removed per step
     overlap_tolerance: float = 0.0  # overlap (in cells h) left alone by the removal
+    solver: str = "newton"  # contact problem solver: newton | nsgs (solvers.py)
+    solver_iterations: int = 50  # per contact solve: Newton iterations or NSGS sweeps
 
 
 @dataclass
@@ -174,7 +184,6 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             wall_vb[c] = walls[int(contacts.beta[c])][0]
     k_total = int(slots.k_size.sum())
     V = np.zeros((k_total, d))
-    Q = np.zeros((k_total, d))
 
     scale = 0.0
     for slot, body in enumerate(slots.bodies):
@@ -187,11 +196,16 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         for c, key in enumerate(_keys(contacts)):
             if key in previous:
                 P[c] = previous[key]
-        _pass_on(steps, slots, _row_sums(slots, P), move=False)
+        _pass_on(steps, slots, row_impulses(slots.a_slot, slots.a_col, slots.b_slot,
+                                       slots.b_col, slots.k_off, P, k_total),
+                 move=False)
 
     delassus = settings.relation == "delassus"
+    options = ContactSolverOptions(method=settings.solver,
+                                   tolerance=SOLVE_TOLERANCE_FRACTION * settings.tolerance,
+                                   max_iterations=settings.solver_iterations, floor=floor)
     done = {i: b.converged(limit=False) for i, b in steps.items()}
-    P_before = P.copy()
+    failed_solves = 0
     for k in range(1, settings.max_iterations + 1):
         updated = set()
         for i, b in steps.items():
@@ -204,39 +218,54 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                     slots.rows[slot], delassus)
             V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = \
                 steps[body].node_velocity(slots.rows[slot])
-        W = np.concatenate([w.ravel() for w in slots.W])
-        w_off = np.r_[0, np.cumsum([w.size for w in slots.W])][:-1].astype(np.int64)
-        Q[:] = 0.0
-        sweeps, _ = gauss_seidel(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
-                                 wall_va, wall_vb, contacts.normal, target / dt, mu,
-                                 slots.k_off, w_off, slots.k_size, W, V, Q, P, status,
-                                 settings.tolerance, floor, MAX_SWEEPS_PER_ITERATION)
-        diag.sweeps += sweeps
-        _pass_on(steps, slots, Q, move=True)
-        changes = np.abs(P - P_before).max(axis=1)
-        change = float(changes.max())
-        P_before[:] = P
+        problem = _problem(slots, contacts, wall_va, wall_vb, target / dt, mu, V, P)
+        result = solve(problem, P, options)
+        failed_solves += result.residual > settings.tolerance
+        if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k == AUTO_TANGENT_ITERATIONS:
+            # tangent = "auto": an exact tangent can make W indefinite under compression
+            # (the contact problem then has no unique solution) or converge slowly where
+            # contacts hold a mode the free body cannot: the projected tangent from here on
+            switched = [i for i, b in steps.items() if b.use_projected_tangent()]
+            if switched:
+                for i in switched:
+                    done[i] = False
+                slots.W = [None] * len(slots.W)
+                continue
+        diag.sweeps += result.iterations
+        _pass_on(steps, slots, problem.row_impulses(result.impulse - P), move=True)
+        P = result.impulse
+        status = result.status
         diag.iterations = k
-        largest = float(np.abs(P).max())
-        diag.residual = change / max(largest, floor)
+        # the complementarity error at the velocities the bodies now have (the impulse move
+        # is linear; a refused move or a lumped relation leaves them elsewhere)
+        for slot, body in enumerate(slots.bodies):
+            V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = \
+                steps[body].node_velocity(slots.rows[slot])
+        actual = problem.relative_velocities(V)
+        diag.residual = residual_norm(problem, P, actual, floor)
         # a body's residual need not be finer than the impulses it carries (same units)
-        p_scale = settings.tolerance * largest
+        p_scale = settings.tolerance * float(np.abs(P).max())
         done = {i: b.converged(limit=False, floor=p_scale * b.impulse_weight)
                 for i, b in steps.items()}
-        if change <= p_scale + floor and all(done.values()):
+        if diag.residual <= settings.tolerance and all(done.values()):
             break
     else:
         diag.converged = False
-        c = int(np.argmax(changes))
+        phi = np.linalg.norm(natural_map_residual(problem, P, actual), axis=1)
+        c = int(np.argmax(phi))
         a, b = int(contacts.alpha[c]), int(contacts.beta[c])
         name_a, name_b = (names[a], names[b]) if names is not None else (a, b)
         where = ", ".join(f"{x:.6g}" for x in node_position(lattice, contacts.node[c:c + 1])[0])
+        bodies_left = [steps[i].stepper.name for i, ok in done.items() if not ok]
         diag.message = (
             f"step {step}: the contact loop did not converge in {settings.max_iterations} "
-            f"iterations (impulse change {diag.residual:.2e} of the largest impulse, "
-            f"{settings.relation} relation; largest change between bodies '{name_a}' and "
-            f"'{name_b}' at the node at ({where})); try a smaller dt, more contact "
-            "max_iterations"
+            f"iterations (complementarity residual {diag.residual:.2e} of the largest "
+            f"impulse, tolerance {settings.tolerance:g}; {settings.relation} relation, "
+            f"{settings.solver} contact solver; largest error between bodies '{name_a}' and "
+            f"'{name_b}' at the node at ({where})"
+            + (f"; bodies whose Newton residual is above its tolerance: "
+               f"{', '.join(bodies_left[:5])}" if bodies_left else "")
+            + "); try a smaller dt, more contact max_iterations"
             + (", a looser contact tolerance or local_relation = \"delassus\"."
                if settings.relation == "lumped" else " or a looser contact tolerance."))
         if settings.on_failure == "stop":
@@ -248,13 +277,18 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     return ContactState(contacts, P, status, gaps), diag
 
 
-def _row_sums(slots: _Slots, P: np.ndarray) -> np.ndarray:
-    """Q: the impulses summed per body contact row (+P on α, −P on β)."""
-    Q = np.zeros((int(slots.k_size.sum()), P.shape[1]))
-    a, b = slots.a_slot >= 0, slots.b_slot >= 0
-    np.add.at(Q, slots.k_off[slots.a_slot[a]] + slots.a_col[a], P[a])
-    np.add.at(Q, slots.k_off[slots.b_slot[b]] + slots.b_col[b], -P[b])
-    return Q
+def _problem(slots: _Slots, contacts: ContactNodes, wall_va: np.ndarray, wall_vb: np.ndarray,
+             bias: np.ndarray, mu: np.ndarray, V: np.ndarray, P: np.ndarray) -> ContactProblem:
+    """The contact problem at the bodies' current iterate: their row velocities V with the
+    impulses P (already in them) removed, V^free = V − W Q(P)."""
+    problem = ContactProblem(
+        normal=contacts.normal, bias=bias, mu=mu, a_slot=slots.a_slot, a_col=slots.a_col,
+        b_slot=slots.b_slot, b_col=slots.b_col, wall_va=wall_va, wall_vb=wall_vb,
+        k_off=slots.k_off, k_size=slots.k_size,
+        w_off=np.r_[0, np.cumsum([w.size for w in slots.W])][:-1].astype(np.int64),
+        W=np.concatenate([w.ravel() for w in slots.W]), V_free=V.copy())
+    problem.V_free -= problem.compliance_times(problem.row_impulses(P))
+    return problem
 
 
 def _pass_on(steps: dict, slots: _Slots, Q: np.ndarray, move: bool) -> None:

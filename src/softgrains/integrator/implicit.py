@@ -64,7 +64,7 @@ class IntegratorSettings:
     """Time integrator and Newton options (case keys under [simulation])."""
 
     kind: str = "theta"  # "theta" | "newmark"
-    theta: float = 0.5
+    theta: float = 1.0
     beta: float = 0.25
     gamma: float = 0.5
     flip: float = 1.0
@@ -72,7 +72,7 @@ class IntegratorSettings:
     tolerance: float = 1e-8
     max_iterations: int = 25
     linear_solver: str = "auto"
-    tangent: str = "projected"  # "projected" (PSD per point) | "exact"
+    tangent: str = "auto"  # "auto" (exact, projected when it fails) | "exact" | "projected"
 
 
 @dataclass(frozen=True)
@@ -199,6 +199,7 @@ class BodyStep:
                  step: int) -> None:
         st = self.settings = stepper.settings
         self.stepper, self.pts, self.dt, self.step = stepper, pts, dt, step
+        self._projected = False  # tangent = "auto": switched to projected in this step
         d = self.d = stepper.lattice.dim
         self.newmark = st.kind == "newmark"
         self.consistent = st.mass_matrix == "consistent"
@@ -277,6 +278,24 @@ class BodyStep:
         self._A = self._lu = self._v_affine = None  # Newton matrix, its LU, v(u) map
         self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
 
+    # -- the Newton matrix's tangent ---------------------------------------------------
+    @property
+    def projected(self) -> bool:
+        """Whether the Newton matrix uses per-point PSD-projected tangents: always with
+        ``tangent = "projected"``, with ``auto`` once :meth:`use_projected_tangent` was
+        called in this step (the exact tangent converges quadratically, but under
+        compression it can make the Newton matrix indefinite)."""
+        return self.settings.tangent == "projected" or self._projected
+
+    def use_projected_tangent(self) -> bool:
+        """With ``tangent = "auto"``, switch to the projected tangent for the rest of the
+        step (the iterate is kept; only the Newton matrix changes). True if it switched."""
+        if self.settings.tangent != "auto" or self._projected:
+            return False
+        self._projected = True
+        self._A = self._lu = None
+        return True
+
     # -- the step equations ------------------------------------------------------------
     def mass_times(self, u: np.ndarray) -> np.ndarray:
         if not self.consistent:
@@ -291,7 +310,7 @@ class BodyStep:
         jmin, w_int = point_stresses(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n,
                                      pts.law, pts.lam, pts.mu, self.Pv, self.Av, want_tangent,
                                      self.n_chunks,
-                                     self.settings.tangent == "projected")
+                                     self.projected)
         if jmin > 0.0:
             gather_forces(self.ptr, self.entries, self.dN, self.Pv, self.f_int)
             if want_tangent:
@@ -454,8 +473,11 @@ class BodyStep:
         return p, float(J[p])
 
     def solve(self) -> None:
-        """Newton iterations without contact, until converged (or a SimulationError)."""
+        """Newton iterations without contact, until converged (or a SimulationError); with
+        ``tangent = "auto"`` the second half of the iterations uses the projected tangent."""
         while not self.converged():
+            if self.result.iterations >= self.settings.max_iterations // 2:
+                self.use_projected_tangent()
             self.newton_update()
 
     def newton_matrix(self) -> sp.bsr_matrix:

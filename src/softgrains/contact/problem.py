@@ -1,0 +1,282 @@
+"""The frictional contact problem of one outer iteration, as plain data (ALGORITHM.md §5–6).
+
+Contacts c = 1..n between bodies α (impulse +P) and β (−P). Every deformable body s in
+contact carries k_s contact rows with velocities V_s (k_s, d) and a compliance W_s
+(k_s d × k_s d): the change of those velocities per unit impulse at one of them (Delassus:
+κ w [A⁻¹]_cc from the body's Newton matrix; lumped: diag(1/m)). A kinematic body (slot −1)
+has W = 0 and a prescribed velocity. With Q_s(P) the impulses summed per row of s,
+
+    V_s(P) = V_s^free + W_s Q_s(P),      w_c(P) = v^α_c(P) − v^β_c(P) = q_c + Σ_c' W_cc' P_c'
+
+and the problem is: find P with, in each contact's frame (n, t), on w̃_n = w_n + b_c
+(b_c: the gap bias of gap.py),
+
+    Signorini  P_n ≥ 0, w̃_n ≥ 0, P_n w̃_n = 0;   Coulomb  ‖P_t‖ ≤ μ P_n, stick (w_t = 0)
+    while ‖P_t‖ < μ P_n, else P_t = −μ P_n w_t/‖w_t‖.
+
+The solvers (solvers.py) see only this object. :func:`natural_map_residual` is the error
+measure all of them share: Φ = P − proj_K(P − ρ ŵ) with K the Coulomb cone and
+ŵ = (w̃_n + μ‖w_t‖, w_t) (De Saxcé's modified velocity), zero exactly at a solution.
+``save``/``load`` write a problem to an .npz file so that a hard step can be replayed.
+Dimension-generic (2D, and 3D with its circular cone).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+FORMAT_VERSION = 1
+VELOCITY_RESOLUTION = 1e-10  # relative: velocity differences below it are round-off
+
+
+@dataclass
+class ContactProblem:
+    """One frictional contact problem (see the module docstring for the equations).
+
+    Per contact: ``normal`` (n, d) from β into α, ``bias`` (n,) added to w_n, ``mu`` (n,),
+    the slot of α's and β's body (−1: kinematic, with velocity ``wall_va``/``wall_vb``) and
+    the column of the contact's row in that body's block. Per body slot: its rows' offset
+    ``k_off`` and count ``k_size`` in ``V_free`` (k_total, d), and the offset ``w_off`` of its
+    block (k d × k d, row-major, (row, component) order) in the flat array ``W``.
+    """
+
+    normal: np.ndarray
+    bias: np.ndarray
+    mu: np.ndarray
+    a_slot: np.ndarray
+    a_col: np.ndarray
+    b_slot: np.ndarray
+    b_col: np.ndarray
+    wall_va: np.ndarray
+    wall_vb: np.ndarray
+    k_off: np.ndarray
+    k_size: np.ndarray
+    w_off: np.ndarray
+    W: np.ndarray
+    V_free: np.ndarray
+
+    @property
+    def n_contacts(self) -> int:
+        return self.normal.shape[0]
+
+    @property
+    def dim(self) -> int:
+        return self.normal.shape[1]
+
+    # -- velocities ------------------------------------------------------------------
+    def row_impulses(self, P: np.ndarray) -> np.ndarray:
+        """Q: the impulses summed per body contact row (+P on α, −P on β)."""
+        return row_impulses(self.a_slot, self.a_col, self.b_slot, self.b_col, self.k_off,
+                            P, self.V_free.shape[0])
+
+    def block(self, slot: int) -> np.ndarray:
+        """Body ``slot``'s compliance W_s as a (k d × k d) matrix (a view)."""
+        kd = int(self.k_size[slot]) * self.dim
+        return self.W[self.w_off[slot]:self.w_off[slot] + kd * kd].reshape(kd, kd)
+
+    def compliance_times(self, Q: np.ndarray) -> np.ndarray:
+        """W_s Q_s for every body: the row velocity changes the row impulses Q give."""
+        out = np.empty_like(Q)
+        for s in range(self.k_size.size):
+            rows = slice(self.k_off[s], self.k_off[s] + self.k_size[s])
+            out[rows] = (self.block(s) @ Q[rows].ravel()).reshape(-1, self.dim)
+        return out
+
+    def row_velocities(self, P: np.ndarray) -> np.ndarray:
+        """V(P) = V^free + W Q(P) at every body contact row."""
+        return self.V_free + self.compliance_times(self.row_impulses(P))
+
+    def relative_velocities(self, V: np.ndarray) -> np.ndarray:
+        """w_c = v^α − v^β from the row velocities V (walls: their prescribed velocity)."""
+        va = np.where((self.a_slot >= 0)[:, None],
+                      V[self.k_off[np.maximum(self.a_slot, 0)] + self.a_col], self.wall_va)
+        vb = np.where((self.b_slot >= 0)[:, None],
+                      V[self.k_off[np.maximum(self.b_slot, 0)] + self.b_col], self.wall_vb)
+        return va - vb
+
+    def velocities(self, P: np.ndarray) -> np.ndarray:
+        """w(P) (n, d), the relative velocities the impulses P give."""
+        return self.relative_velocities(self.row_velocities(P))
+
+    # -- the assembled operator -------------------------------------------------------
+    def touches(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Every (contact, body slot, column, sign) where a contact touches a deformable
+        body (sign +1 on the α side, −1 on β), grouped by slot."""
+        a, b = self.a_slot >= 0, self.b_slot >= 0
+        contact = np.r_[np.flatnonzero(a), np.flatnonzero(b)]
+        slot = np.r_[self.a_slot[a], self.b_slot[b]]
+        col = np.r_[self.a_col[a], self.b_col[b]]
+        sign = np.r_[np.ones(a.sum()), -np.ones(b.sum())]
+        order = np.argsort(slot, kind="stable")
+        return contact[order], slot[order], col[order], sign[order]
+
+    def delassus(self) -> sp.csr_matrix:
+        """W (n d × n d, (contact, component) order, global axes): w = q + W P.
+
+        W_cc' = Σ_s σ_c σ_c' W_s[col_c, col_c'] over the bodies s that both contacts touch
+        (σ = +1 on the α side, −1 on the β side).
+        """
+        d, n = self.dim, self.n_contacts
+        contact, slot, col, sign = self.touches()
+        if contact.size == 0:
+            return sp.csr_matrix((n * d, n * d))
+        # all pairs (i, j) of touches of the same body
+        start = np.searchsorted(slot, slot, side="left")
+        count = np.searchsorted(slot, slot, side="right") - start
+        i = np.repeat(np.arange(contact.size), count)
+        j = start[i] + np.arange(i.size) - np.repeat(np.cumsum(count) - count, count)
+        kd = self.k_size[slot[i]] * d
+        p, q = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
+        flat = (self.w_off[slot[i]][:, None, None]
+                + (col[i][:, None, None] * d + p) * kd[:, None, None]
+                + col[j][:, None, None] * d + q)
+        vals = self.W[flat] * (sign[i] * sign[j])[:, None, None]
+        rows = contact[i][:, None, None] * d + p + 0 * q
+        cols = contact[j][:, None, None] * d + q + 0 * p
+        return sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(n * d, n * d))
+
+    def diagonal_blocks(self) -> np.ndarray:
+        """W_cc (n, d, d): each contact's own compliance, Σ of its bodies' diagonal blocks."""
+        d = self.dim
+        contact, slot, col, _ = self.touches()
+        kd = self.k_size[slot] * d
+        p, q = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
+        flat = (self.w_off[slot][:, None, None] + (col[:, None, None] * d + p) * kd[:, None, None]
+                + col[:, None, None] * d + q)
+        Wcc = np.zeros((self.n_contacts, d, d))
+        np.add.at(Wcc, contact, self.W[flat])
+        return Wcc
+
+    def free_velocity(self) -> np.ndarray:
+        """q = w(0) (n, d): the relative velocities without any impulse of this problem."""
+        return self.relative_velocities(self.V_free)
+
+    def frames(self) -> np.ndarray:
+        """(n, d, d): each contact's orthonormal frame, rows n, t1 (, t2)."""
+        return contact_frames(self.normal)
+
+    # -- files ------------------------------------------------------------------------
+    def save(self, path: str | Path) -> None:
+        """Write the problem to an .npz file (replay it with :meth:`load`)."""
+        np.savez_compressed(path, format_version=FORMAT_VERSION,
+                            **{f.name: getattr(self, f.name) for f in fields(self)})
+
+    @classmethod
+    def load(cls, path: str | Path) -> ContactProblem:
+        with np.load(path) as data:
+            if int(data["format_version"]) != FORMAT_VERSION:
+                raise ValueError(f"{path}: contact problem format {int(data['format_version'])}"
+                                 f", this version reads {FORMAT_VERSION}")
+            return cls(**{f.name: data[f.name] for f in fields(cls)})
+
+
+def row_impulses(a_slot: np.ndarray, a_col: np.ndarray, b_slot: np.ndarray, b_col: np.ndarray,
+                 k_off: np.ndarray, P: np.ndarray, k_total: int) -> np.ndarray:
+    """Q (k_total, d): the impulses P summed per body contact row (+P on α, −P on β)."""
+    Q = np.zeros((k_total, P.shape[1]))
+    a, b = a_slot >= 0, b_slot >= 0
+    np.add.at(Q, k_off[a_slot[a]] + a_col[a], P[a])
+    np.add.at(Q, k_off[b_slot[b]] + b_col[b], -P[b])
+    return Q
+
+
+def contact_frames(normal: np.ndarray) -> np.ndarray:
+    """Orthonormal frames (n, d, d) with the normal first: 2D t = (−n_y, n_x); 3D two
+    tangents from the axis least aligned with n."""
+    n, d = normal.shape
+    frames = np.zeros((n, d, d))
+    frames[:, 0] = normal
+    if d == 2:
+        frames[:, 1, 0] = -normal[:, 1]
+        frames[:, 1, 1] = normal[:, 0]
+    elif d == 3:
+        axis = np.zeros_like(normal)
+        axis[np.arange(n), np.argmin(np.abs(normal), axis=1)] = 1.0
+        t1 = np.cross(normal, axis)
+        t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+        frames[:, 1] = t1
+        frames[:, 2] = np.cross(normal, t1)
+    return frames
+
+
+def to_local(frames: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Components (n, d) of global vectors x in each contact's frame."""
+    return np.einsum("cij,cj->ci", frames, x)
+
+
+def to_global(frames: np.ndarray, x: np.ndarray) -> np.ndarray:
+    return np.einsum("cji,cj->ci", frames, x)
+
+
+def project_to_cone(r: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """Projection of local vectors r = (r_n, r_t) (n, d) onto the Coulomb cones
+    K = {‖r_t‖ ≤ μ r_n} (the Euclidean projection onto a second-order cone)."""
+    rn, rt = r[:, 0], r[:, 1:]
+    norm_t = np.linalg.norm(rt, axis=1)
+    out = r.copy()
+    polar = mu * norm_t <= -rn  # in the polar cone: projects to the apex
+    inside = norm_t <= mu * rn
+    edge = ~(polar | inside)
+    scale = (rn[edge] + mu[edge] * norm_t[edge]) / (1.0 + mu[edge] ** 2)
+    out[polar] = 0.0
+    out[edge, 0] = scale
+    safe = np.where(norm_t[edge] > 0.0, norm_t[edge], 1.0)
+    out[edge, 1:] = (mu[edge] * scale / safe)[:, None] * rt[edge]
+    return out
+
+
+def natural_map_residual(problem: ContactProblem, P: np.ndarray, w: np.ndarray | None = None,
+                         rho: np.ndarray | None = None) -> np.ndarray:
+    """Φ_c = P_c − proj_K(P_c − ρ_c ŵ_c) in each contact's frame (n, d), impulse units.
+
+    ŵ = (w_n + b + μ‖w_t‖, w_t); ρ_c defaults to 1/(n·W_cc n) (the contact's own normal
+    stiffness), which makes Φ the impulse change a local solve would make. ``w``: the
+    relative velocities (default: those of the problem at P).
+    """
+    frames = problem.frames()
+    if w is None:
+        w = problem.velocities(P)
+    if rho is None:
+        rho = normal_masses(problem)
+    r = to_local(frames, P)
+    u = to_local(frames, w)
+    u[:, 0] += problem.bias + problem.mu * np.linalg.norm(u[:, 1:], axis=1)
+    return r - project_to_cone(r - rho[:, None] * u, problem.mu)
+
+
+def normal_masses(problem: ContactProblem) -> np.ndarray:
+    """1/(n·W_cc n) per contact (where no body can move there, the largest finite one)."""
+    Wcc = problem.diagonal_blocks()
+    wnn = np.einsum("ci,cij,cj->c", problem.normal, Wcc, problem.normal)
+    positive = wnn > 0.0
+    scale = wnn[positive].max() if positive.any() else 1.0
+    return 1.0 / np.where(positive, wnn, scale)
+
+
+def impulse_scale(problem: ContactProblem) -> float:
+    """The impulse scale of the problem's velocities: the largest impulse the free
+    velocities call for, max_c ρ_c max(0, −(q_n + b)), and at least the impulse a relative
+    error of VELOCITY_RESOLUTION in the contact's velocities would give (w̃_n = w_n + b is
+    a difference of two terms that nearly cancel at a resting contact)."""
+    q = problem.free_velocity()
+    q_n = np.einsum("ci,ci->c", q, problem.normal) + problem.bias
+    rho = normal_masses(problem)
+    resolution = VELOCITY_RESOLUTION * (np.linalg.norm(q, axis=1) + np.abs(problem.bias))
+    return float(np.max(rho * np.maximum(-q_n, resolution), initial=0.0))
+
+
+def residual_norm(problem: ContactProblem, P: np.ndarray, w: np.ndarray | None = None,
+                  floor: float = 0.0) -> float:
+    """max_c ‖Φ_c‖ / max(max_c ‖P_c‖, impulse_scale, floor): the relative complementarity
+    error (the scale of the free velocities keeps it meaningful where all impulses are
+    nearly zero, e.g. when a contact is about to open)."""
+    if problem.n_contacts == 0:
+        return 0.0
+    phi = natural_map_residual(problem, P, w)
+    largest = float(np.linalg.norm(P, axis=1).max())
+    scale = max(largest, impulse_scale(problem), floor, 1e-300)
+    return float(np.linalg.norm(phi, axis=1).max()) / scale

@@ -1,0 +1,216 @@
+"""Solvers of the frictional contact problem (problem.py) behind one interface.
+
+    result = solve(problem, P0, ContactSolverOptions(method=..., tolerance=...))
+
+Every solver stops on the shared natural-map residual (problem.residual_norm):
+max_c ‖Φ_c‖ ≤ tolerance · max_c ‖P_c‖.
+
+- ``newton`` (default): semismooth Newton on the Alart–Curnier function, in each contact's
+  frame (r = (r_n, r_t), w̃_n = w_n + b, ρ_c = 1/(n·W_cc n)):
+      λ_n = r_n − ρ w̃_n,   Φ_n = r_n − max(0, λ_n)
+      λ_t = r_t − ρ w_t,    Φ_t = r_t − proj_{‖·‖ ≤ μ max(0, λ_n)}(λ_t)
+  with w = q + W r: the generalized Jacobian J = (I − G) + G ρ W (G: the derivative of the
+  projections, block-diagonal) is solved with a sparse LU and the step damped by a
+  backtracking line search on ½‖Φ‖². Its convergence does not depend on the conditioning
+  of W (a free grain between walls at Δt c/h ~ 10³ gives cond(W) ~ 10⁶, where Gauss–Seidel
+  needs ~10⁶ sweeps); frictionless problems are solved in a finite number of steps (an
+  active-set method). Dimension-generic (the 3D cone's projection is exact).
+- ``nsgs``: nonlinear Gauss–Seidel over contacts with the exact local solution
+  (gauss_seidel.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from softgrains.contact.gauss_seidel import gauss_seidel
+from softgrains.contact.local_law import OPEN, SLIP, STICK
+from softgrains.contact.problem import (
+    ContactProblem,
+    normal_masses,
+    residual_norm,
+    to_global,
+    to_local,
+)
+
+METHODS = ("newton", "nsgs")
+LINE_SEARCH_HALVINGS = 12
+STAGNATION_ITERATIONS = 6  # Newton stops when its best residual is this many iterations old
+
+
+@dataclass(frozen=True)
+class ContactSolverOptions:
+    """``method``: newton | nsgs; ``tolerance``: on the relative natural-map residual;
+    ``max_iterations``: Newton iterations or Gauss–Seidel sweeps; ``floor``: an impulse
+    below which the relative residual is measured against the floor instead."""
+
+    method: str = "newton"
+    tolerance: float = 1e-6
+    max_iterations: int = 50
+    floor: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"contact solver method {self.method!r}: one of {METHODS}")
+
+
+@dataclass
+class ContactResult:
+    """Impulses (n, d) on α, per-contact status, iterations, residual, convergence."""
+
+    impulse: np.ndarray
+    status: np.ndarray
+    iterations: int
+    residual: float
+    converged: bool
+    history: list[float] = field(default_factory=list)
+
+
+def solve(problem: ContactProblem, P0: np.ndarray | None = None,
+          options: ContactSolverOptions = ContactSolverOptions()) -> ContactResult:
+    """Solve the contact problem from the initial guess P0 (default 0)."""
+    P = np.zeros((problem.n_contacts, problem.dim)) if P0 is None else np.array(P0, float)
+    if problem.n_contacts == 0:
+        return ContactResult(P, np.zeros(0, np.int64), 0, 0.0, True)
+    if options.method == "nsgs":
+        return _nsgs(problem, P, options)
+    return _newton(problem, P, options)
+
+
+def contact_status(problem: ContactProblem, P: np.ndarray) -> np.ndarray:
+    """OPEN (no impulse), STICK (strictly inside the cone) or SLIP (on its boundary)."""
+    r = to_local(problem.frames(), P)
+    norm_t = np.linalg.norm(r[:, 1:], axis=1)
+    scale = max(float(np.abs(r).max()), 1e-300)
+    status = np.where(norm_t < problem.mu * r[:, 0] * (1.0 - 1e-9), STICK, SLIP)
+    return np.where(r[:, 0] <= 1e-14 * scale, OPEN, status).astype(np.int64)
+
+
+# -- nonlinear Gauss–Seidel ---------------------------------------------------------------
+def _nsgs(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
+          ) -> ContactResult:
+    V = problem.row_velocities(P)
+    Q = np.zeros_like(V)
+    status = np.zeros(problem.n_contacts, np.int64)
+    history = []
+    sweeps = 0
+    residual = residual_norm(problem, P, floor=options.floor)
+    chunk = 10  # sweeps between two residual evaluations
+    while sweeps < options.max_iterations and residual > options.tolerance:
+        n, _ = gauss_seidel(problem.a_slot, problem.a_col, problem.b_slot, problem.b_col,
+                            problem.wall_va, problem.wall_vb, problem.normal, problem.bias,
+                            problem.mu, problem.k_off, problem.w_off, problem.k_size, problem.W,
+                            V, Q, P, status, 0.0, 0.0, min(chunk, options.max_iterations - sweeps))
+        sweeps += n
+        residual = residual_norm(problem, P, problem.relative_velocities(V), options.floor)
+        history.append(residual)
+    return ContactResult(P, contact_status(problem, P), sweeps, residual,
+                         residual <= options.tolerance, history)
+
+
+# -- semismooth Newton (Alart–Curnier) ---------------------------------------------------
+@dataclass
+class _Linearised:
+    """Φ(r) and the pieces of its generalized Jacobian at one r (local frames)."""
+
+    phi: np.ndarray  # (n, d)
+    G: np.ndarray  # (n, d, d): derivative of the projections w.r.t. λ
+
+
+def _alart_curnier(r: np.ndarray, u: np.ndarray, bias: np.ndarray, mu: np.ndarray,
+                   rho: np.ndarray, movable: np.ndarray) -> _Linearised:
+    n, d = r.shape
+    lam_n = r[:, 0] - rho * (u[:, 0] + bias)
+    lam_t = r[:, 1:] - rho[:, None] * u[:, 1:]
+    pressed = (lam_n > 0.0) & movable
+    radius = mu * np.where(pressed, lam_n, 0.0)
+    norm_t = np.linalg.norm(lam_t, axis=1)
+    inside = (norm_t <= radius) | (norm_t == 0.0)
+    safe = np.where(inside, 1.0, norm_t)
+    proj_t = np.where(inside[:, None], lam_t, (radius / safe)[:, None] * lam_t)
+    proj_t[~movable] = 0.0
+    phi = np.empty_like(r)
+    phi[:, 0] = r[:, 0] - np.where(pressed, lam_n, 0.0)
+    phi[:, 1:] = r[:, 1:] - proj_t
+    G = np.zeros((n, d, d))
+    G[:, 0, 0] = pressed
+    eye = np.eye(d - 1)
+    unit = lam_t / safe[:, None]
+    slide = ~inside & movable
+    G[:, 1:, 1:] = np.where(inside[:, None, None] & movable[:, None, None], eye, 0.0)
+    G[slide, 1:, 1:] = ((radius[slide] / safe[slide])[:, None, None]
+                        * (eye - unit[slide, :, None] * unit[slide, None, :]))
+    G[slide, 1:, 0] = (mu[slide] * pressed[slide])[:, None] * unit[slide]
+    return _Linearised(phi, G)
+
+
+def _block_diagonal(blocks: np.ndarray) -> sp.csr_matrix:
+    n, d, _ = blocks.shape
+    rows = (np.arange(n)[:, None, None] * d + np.arange(d)[None, :, None]
+            + np.zeros((1, 1, d), np.int64))
+    cols = (np.arange(n)[:, None, None] * d + np.arange(d)[None, None, :]
+            + np.zeros((1, d, 1), np.int64))
+    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(n * d, n * d))
+
+
+def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
+            ) -> ContactResult:
+    n, d = problem.n_contacts, problem.dim
+    frames = problem.frames()
+    T = _block_diagonal(frames)
+    W = (T @ problem.delassus() @ T.T).tocsr()
+    q = to_local(frames, problem.free_velocity()).ravel()
+    Wcc_nn = np.einsum("ci,cij,cj->c", problem.normal, problem.diagonal_blocks(),
+                       problem.normal)
+    movable = Wcc_nn > 0.0
+    rho = normal_masses(problem)
+    mu, bias = problem.mu, problem.bias
+    r = to_local(frames, P).ravel()
+    r[np.repeat(~movable, d)] = 0.0
+
+    def evaluate(r):
+        u = (q + W @ r).reshape(n, d)
+        return u, _alart_curnier(r.reshape(n, d), u, bias, mu, rho, movable)
+
+    u, lin = evaluate(r)
+    merit = 0.5 * float(np.sum(lin.phi ** 2))
+    history = []
+    iterations = 0
+    residual = residual_norm(problem, to_global(frames, r.reshape(n, d)),
+                             to_global(frames, u), options.floor)
+    history.append(residual)
+    identity = sp.identity(n * d, format="csr")
+    best = (residual, r, iterations)
+    while (residual > options.tolerance and iterations < options.max_iterations
+           and iterations - best[2] < STAGNATION_ITERATIONS):
+        iterations += 1
+        G = _block_diagonal(lin.G)
+        J = (identity - G + G @ sp.diags(np.repeat(rho, d)) @ W).tocsc()
+        try:
+            dr = spla.splu(J).solve(-lin.phi.ravel())
+        except RuntimeError:  # singular generalized Jacobian: a damped least-squares step
+            dr = spla.lsqr(J, -lin.phi.ravel(), damp=1e-8)[0]
+        step = 1.0
+        for _ in range(LINE_SEARCH_HALVINGS):
+            r_try = r + step * dr
+            u_try, lin_try = evaluate(r_try)
+            merit_try = 0.5 * float(np.sum(lin_try.phi ** 2))
+            if merit_try <= (1.0 - 1e-4 * step) * merit:
+                break
+            step *= 0.5
+        r, u, lin, merit = r_try, u_try, lin_try, merit_try
+        residual = residual_norm(problem, to_global(frames, r.reshape(n, d)),
+                                 to_global(frames, u), options.floor)
+        history.append(residual)
+        if residual < best[0]:
+            best = (residual, r, iterations)
+    # an indefinite W (a body's exact tangent under compression) can make the active set
+    # cycle near the solution: the best iterate is returned
+    residual, r = best[0], best[1]
+    P = to_global(frames, r.reshape(n, d))
+    return ContactResult(P, contact_status(problem, P), iterations, residual,
+                         residual <= options.tolerance, history)
