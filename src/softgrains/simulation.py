@@ -349,8 +349,10 @@ class Simulation:
                 last = self.at_end
                 dg = self.last_diagnostics
                 if not dg.contact.converged and log is not None:
-                    log.warning("%s (going on: [contact] on_failure = \"warn\")",
-                                dg.contact.message)
+                    saved = _save_contact_problem(out, k - 1, dg.contact.problem)
+                    log.warning("%s (going on: [contact] on_failure = \"warn\")%s",
+                                dg.contact.message, saved)
+                    dg.contact.problem = None
                 changed = self.protocol is not None and self.protocol.phase != phase
                 if k % cfg.interval == 0 or last or changed:
                     row = record(wall)
@@ -385,14 +387,16 @@ class Simulation:
                             "go further", self.protocol.phase)
             checkpoint(_time.perf_counter() - t0)
         except SimulationError as err:
-            status, message = "failed", str(err)
+            status = "failed"
+            message = str(err) + _save_contact_problem(
+                out, err.diagnosis.get("step"), err.diagnosis.get("contact_problem"))
             while self.retry_events and log is not None:  # the retries that did not help
                 log.warning("%s", self.retry_events.pop(0))
             if self.checkpoint_step is not None and out is not None:
                 message += (f"\nthe last good checkpoint (step {self.checkpoint_step}) is "
                             f"{out / CHECKPOINT_NAME}: change the case (e.g. a smaller dt) "
                             "and continue with --resume")
-                err.args = (message,)
+            err.args = (message,)
             if log is not None:
                 log.error("%s", message)
             raise
@@ -477,6 +481,20 @@ def _step_of(name: str) -> int:
     """The step in an output file name such as points_00000120.vtu (-1 if none)."""
     match = _STEP_IN_NAME.search(str(name))
     return int(match.group(1)) if match else -1
+
+
+def _save_contact_problem(out: Path | None, step, problem) -> str:
+    """Write the contact problem of a step whose coupled solve did not converge to
+    out/contact_problems/step_<N>.npz (replay: ContactProblem.load, contact.solve); returns
+    the sentence for the message ('' when there is nothing to write or no folder)."""
+    if out is None or problem is None:
+        return ""
+    folder = out / "contact_problems"
+    folder.mkdir(exist_ok=True)
+    path = folder / f"step_{int(step):08d}.npz"
+    problem.save(path)
+    return (f"\nthe contact problem of its last iteration is in {path} (replay it with "
+            "softgrains.contact.ContactProblem.load and softgrains.contact.solve)")
 
 
 def _drop_outputs_after(out: Path, step: int) -> None:

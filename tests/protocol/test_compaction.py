@@ -29,9 +29,10 @@ def small_compaction(friction=0.0, **protocol):
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     out = tmp_path_factory.mktemp("compaction")
-    # 1 m/s: six disks two diameters wide collapse in bursts at 5 m/s (kinetic energy up to
-    # the strain energy), which leaves too few quasi-static steps to compare stresses on
-    sim = Simulation(small_compaction(wall_speed=1.0), out=out)
+    # 0.5 m/s: six disks two diameters wide collapse in bursts at 5 m/s (kinetic energy up
+    # to the strain energy), and still often at 1 m/s, which leaves too few quasi-static
+    # steps to compare stresses on
+    sim = Simulation(small_compaction(wall_speed=0.5), out=out)
     summary = sim.run()
     return out, summary, read_table(out / "series.csv")
 
@@ -67,8 +68,8 @@ def test_precompaction_reaches_sigma0_then_compaction_to_the_stop(run):
     assert series["stress_yy"][last_pre] == pytest.approx(5e3, rel=0.01)
     assert protocol["phi0"] == pytest.approx(series["phi"][last_pre])
     assert protocol["h0"] == pytest.approx(series["wall_gap"][last_pre])
-    # compaction: the wall moves at 1 m/s, the gap shrinks, φ and the stress grow
-    assert np.allclose(series["top_wall_velocity"][comp], -1.0)
+    # compaction: the wall moves at 0.5 m/s, the gap shrinks, φ and the stress grow
+    assert np.allclose(series["top_wall_velocity"][comp], -0.5)
     assert np.all(np.diff(series["wall_gap"][comp]) < 0)
     assert np.all(np.diff(series["phi"][comp]) > 0)
     assert series["stress_yy"][comp][-1] >= 30 * 5e3
@@ -77,16 +78,19 @@ def test_precompaction_reaches_sigma0_then_compaction_to_the_stop(run):
 
 
 def test_wall_stress_matches_the_volume_averaged_stress(run):
-    """ALGORITHM.md §9 cross-check once quasi-static (kinetic ≤ 0.01 × strain energy).
-    Measured (2026-11-23, wall at 1 m/s): on the 26 such steps the averaged σ_yy is within
-    5.4% of the wall's (1.9% on average); up to 14% off when kinetic ≤ 0.1 × strain."""
+    """ALGORITHM.md §9 cross-check once quasi-static, VALIDATION.md C9's 5%: on the steps
+    whose kinetic energy is ≤ 0.002 × the strain energy (ALGORITHM.md §8 calls 1e-3
+    equilibrium). Measured (2026-12-01, wall at 0.5 m/s): 18 such steps, the averaged σ_yy
+    within 3.2% of the wall's (1.3% on average); with kinetic ≤ 0.01 × strain (83 steps)
+    one burst step is 7.5% off (1.6% on average). (At 1 m/s, the earlier set-up, no step
+    reached 2e-3.)"""
     _, _, series = run
     comp = series["phase"] == "compaction"
-    calm = comp & (series["kinetic_energy"] <= 0.01 * series["strain_energy"])
+    calm = comp & (series["kinetic_energy"] <= 0.002 * series["strain_energy"])
     assert calm.sum() >= 10
     deviation = np.abs(series["stress_yy_avg"][calm] / series["stress_yy"][calm] - 1.0)
     assert deviation.mean() < 0.03
-    assert deviation.max() < 0.07
+    assert deviation.max() < 0.05
     # frictionless side walls: the bottom wall carries what the top wall does
     bottom = np.abs(series["stress_yy_bottom"][calm] / series["stress_yy"][calm] - 1.0)
     assert bottom.mean() < 0.03
@@ -104,7 +108,8 @@ def test_packing_fraction_measures_agree_and_overlap_stays_small(run):
                                                        "overlap_fraction"))
     assert np.all(overlap >= 0.0) and np.all(covered <= 1.0)
     assert np.all(phi - covered >= overlap - 2e-3)
-    assert phi[0] - 5e-3 < covered[0] <= phi[0]
+    # (the raster counts pixels of δ/4 at the cells' edges: 3e-5 of the box above φ seen)
+    assert phi[0] - 5e-3 < covered[0] <= phi[0] + 1e-3
     assert overlap[-1] < 5e-3
 
 

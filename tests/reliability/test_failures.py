@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pytest
 from reliability_cases import FREE_DISK, case_dict, write_case
 
@@ -82,25 +83,25 @@ def test_failure_exits_3_saying_what_where_and_what_to_try(kind, tmp_path, capsy
 
 
 def test_failure_keeps_the_last_good_checkpoint_and_resume_goes_on(tmp_path, capsys):
-    """Two disks meet at step 14, where one contact iteration to a 1e-13 tolerance is not
+    """Two disks meet at step 15, where one contact iteration to a 1e-13 tolerance is not
     enough; resumed with the default limit and tolerance the run goes on from the last good
     checkpoint."""
     data = _two_disks(max_iterations=1, tolerance=1e-13, on_failure="stop")
     data["simulation"]["dt"] = 5e-3
     data["bodies"][0]["center"], data["bodies"][1]["center"] = [0.55, 1.0], [1.45, 1.0]
-    data["output"]["checkpoint_interval"] = 5
+    data["output"]["checkpoint_interval"] = 4
     case = write_case(tmp_path / "case.toml", data)
     out = tmp_path / "out"
     assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 3
     err = capsys.readouterr().err
-    assert "step 14: the contact loop" in err
-    assert "last good checkpoint (step 10)" in err and "--resume" in err
+    assert "step 15: the contact loop" in err
+    assert "last good checkpoint (step 12)" in err and "--resume" in err
     _, meta = read_checkpoint(out / "checkpoint.h5")
-    assert meta["step"] == 10
+    assert meta["step"] == 12
     assert main(["run", str(case), "--out", str(out), "--resume", "--no-figures",
                  "--set", "contact.max_iterations=200", "--set", "contact.tolerance=1e-4"]) == 0
     series = read_table(out / "series.csv")
-    assert series["step"].tolist() == list(range(21))  # rows 11-14 written once
+    assert series["step"].tolist() == list(range(21))  # rows 13-15 written once
     assert json.loads((out / "summary.json").read_text())["status"] == "completed"
 
 
@@ -144,3 +145,25 @@ def test_a_point_leaving_the_grid_is_not_retried(tmp_path):
     out = tmp_path / "out"
     assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 3
     assert json.loads((out / "summary.json").read_text())["retried_steps"] == 0
+
+
+def test_an_unconverged_contact_problem_is_saved_and_replays(tmp_path):
+    """The contact problem of a step whose coupled loop failed is written beside the run;
+    loaded back, it is the same problem: every solver gives the same impulses on it."""
+    from softgrains.contact import ContactProblem, ContactSolverOptions, solve
+
+    data, _ = FAILURES["contact"]
+    case = write_case(tmp_path / "case.toml", data)
+    out = tmp_path / "out"
+    assert main(["run", str(case), "--out", str(out), "--no-figures"]) == 3
+    path = out / "contact_problems" / "step_00000000.npz"
+    assert str(path) in json.loads((out / "summary.json").read_text())["message"]
+    problem = ContactProblem.load(path)
+    assert problem.n_contacts > 0
+    newton = solve(problem, None, ContactSolverOptions("newton", tolerance=1e-10))
+    nsgs = solve(problem, None, ContactSolverOptions("nsgs", tolerance=1e-10,
+                                                     max_iterations=20000))
+    assert newton.converged and nsgs.converged
+    scale = np.abs(newton.impulse).max()
+    assert scale > 0.0
+    assert np.abs(newton.impulse - nsgs.impulse).max() <= 1e-6 * scale

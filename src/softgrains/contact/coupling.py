@@ -34,6 +34,7 @@ from softgrains.contact.local_law import SLIP, STICK
 from softgrains.contact.problem import (
     ContactProblem,
     natural_map_residual,
+    relative_velocities,
     residual_norm,
     row_impulses,
 )
@@ -75,6 +76,7 @@ class ContactDiagnostics:
     sliding: int = 0
     converged: bool = True
     message: str = ""
+    problem: ContactProblem | None = None  # the last iteration's, kept when not converged
 
 
 @dataclass
@@ -171,8 +173,6 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         return ContactState(contacts, P, status, np.zeros(0)), diag
     gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies)
             if gap_points is not None else np.zeros(n))
-    target = effective_gaps(gaps, settings.overlap_removal,
-                            settings.overlap_tolerance * lattice.h)
     mu = np.asarray(friction(contacts.alpha, contacts.beta), float)
     slots = _Slots(steps, contacts)
     wall_va = np.zeros((n, d))
@@ -184,6 +184,18 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             wall_vb[c] = walls[int(contacts.beta[c])][0]
     k_total = int(slots.k_size.sum())
     V = np.zeros((k_total, d))
+    # the gap predicted at the end of the step by the integrator's own displacement,
+    # g + Δt[(1 − θ) w_n^n + θ w_n^{n+1}] ≥ 0  ⇔  w_n^{n+1} + (g + (1 − θ)Δt w_n^n)/(θΔt) ≥ 0
+    theta = _velocity_weight(next(iter(steps.values())).settings)
+    for slot, body in enumerate(slots.bodies):
+        V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = \
+            steps[body].v_n[slots.rows[slot]]
+    start = np.einsum("ci,ci->c", relative_velocities(
+        slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off, wall_va, wall_vb,
+        V), contacts.normal)
+    predicted = gaps + (1.0 - theta) * dt * start
+    bias = effective_gaps(predicted, settings.overlap_removal,
+                          settings.overlap_tolerance * lattice.h) / (theta * dt)
 
     scale = 0.0
     for slot, body in enumerate(slots.bodies):
@@ -196,9 +208,11 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         for c, key in enumerate(_keys(contacts)):
             if key in previous:
                 P[c] = previous[key]
-        _pass_on(steps, slots, row_impulses(slots.a_slot, slots.a_col, slots.b_slot,
-                                       slots.b_col, slots.k_off, P, k_total),
-                 move=False)
+        Q = row_impulses(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off,
+                         P, k_total)
+        for slot, body in enumerate(slots.bodies):
+            steps[body].add_impulses(slots.rows[slot], Q[slots.k_off[slot]:slots.k_off[slot]
+                                                         + slots.k_size[slot]])
 
     delassus = settings.relation == "delassus"
     options = ContactSolverOptions(method=settings.solver,
@@ -207,24 +221,24 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     done = {i: b.converged(limit=False) for i, b in steps.items()}
     failed_solves = 0
     for k in range(1, settings.max_iterations + 1):
-        updated = set()
-        for i, b in steps.items():
-            if not done[i]:
-                b.newton_update()
-                updated.add(i)
+        # the Newton direction of every body not converged, with the current impulses
+        du = {i: b.newton_direction() for i, b in steps.items() if not done[i]}
         for slot, body in enumerate(slots.bodies):
-            if slots.W[slot] is None or (delassus and body in updated):
-                slots.response[slot], slots.W[slot] = steps[body].contact_response(
-                    slots.rows[slot], delassus)
-            V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = \
-                steps[body].node_velocity(slots.rows[slot])
-        problem = _problem(slots, contacts, wall_va, wall_vb, target / dt, mu, V, P)
+            s, rows = steps[body], slots.rows[slot]
+            if slots.W[slot] is None or (delassus and body in du):
+                slots.response[slot], slots.W[slot] = s.contact_response(rows, delassus)
+            # the contact rows' velocities at the end of that Newton step (linear prediction)
+            v = s.node_velocity(rows)
+            if body in du:
+                v = v + s.velocity_affine()[0] * du[body][rows]
+            V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = v
+        problem = _problem(slots, contacts, wall_va, wall_vb, bias, mu, V, P)
         result = solve(problem, P, options)
         failed_solves += result.residual > settings.tolerance
         if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k == AUTO_TANGENT_ITERATIONS:
             # tangent = "auto": an exact tangent can make W indefinite under compression
-            # (the contact problem then has no unique solution) or converge slowly where
-            # contacts hold a mode the free body cannot: the projected tangent from here on
+            # (the contact problem then has no unique solution) or converge slowly: the
+            # projected tangent from here on (this iteration's directions are dropped)
             switched = [i for i, b in steps.items() if b.use_projected_tangent()]
             if switched:
                 for i in switched:
@@ -232,12 +246,23 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 slots.W = [None] * len(slots.W)
                 continue
         diag.sweeps += result.iterations
-        _pass_on(steps, slots, problem.row_impulses(result.impulse - P), move=True)
+        # the combined step: Newton direction plus the response to the impulse changes,
+        # du + X ΔQ = −A⁻¹ R(u; P_new), taken with the line search
+        change = problem.row_impulses(result.impulse - P)
+        for slot, body in enumerate(slots.bodies):
+            q = change[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]]
+            if not np.any(q):
+                continue
+            s, rows = steps[body], slots.rows[slot]
+            s.add_impulses(rows, q)
+            du[body] = du.get(body, 0.0) + s.impulse_move(rows, q, slots.response[slot])
+        for i, step_u in du.items():
+            steps[i].take_step(step_u)
         P = result.impulse
         status = result.status
         diag.iterations = k
-        # the complementarity error at the velocities the bodies now have (the impulse move
-        # is linear; a refused move or a lumped relation leaves them elsewhere)
+        # the complementarity error at the velocities the bodies now have (the predicted
+        # ones unless the line search shortened a step or the relation is lumped)
         for slot, body in enumerate(slots.bodies):
             V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = \
                 steps[body].node_velocity(slots.rows[slot])
@@ -268,13 +293,21 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             + "); try a smaller dt, more contact max_iterations"
             + (", a looser contact tolerance or local_relation = \"delassus\"."
                if settings.relation == "lumped" else " or a looser contact tolerance."))
+        diag.problem = problem
         if settings.on_failure == "stop":
             raise SimulationError(diag.message, kind="contact", step=step,
-                                  body=name_a, other=name_b)
+                                  body=name_a, other=name_b, contact_problem=problem)
     diag.active = int(np.sum(np.any(P != 0.0, axis=1)))
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))
     return ContactState(contacts, P, status, gaps), diag
+
+
+def _velocity_weight(settings) -> float:
+    """θ in u = Δt[(1 − θ) v^n + θ v^{n+1}]: the θ-scheme's θ; β/γ for Newmark (exact for
+    the trapezoidal rule, β/γ = ½, whose u = ½Δt(v^n + v^{n+1}); other β, γ add a term in
+    a^n that is left out)."""
+    return settings.beta / settings.gamma if settings.kind == "newmark" else settings.theta
 
 
 def _problem(slots: _Slots, contacts: ContactNodes, wall_va: np.ndarray, wall_vb: np.ndarray,
@@ -289,12 +322,3 @@ def _problem(slots: _Slots, contacts: ContactNodes, wall_va: np.ndarray, wall_vb
         W=np.concatenate([w.ravel() for w in slots.W]), V_free=V.copy())
     problem.V_free -= problem.compliance_times(problem.row_impulses(P))
     return problem
-
-
-def _pass_on(steps: dict, slots: _Slots, Q: np.ndarray, move: bool) -> None:
-    """Add the impulse changes to each body's b (and move its iterate when ``move``)."""
-    for slot, body in enumerate(slots.bodies):
-        q = Q[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]]
-        if not np.any(q):
-            continue
-        steps[body].apply_impulses(slots.rows[slot], q, slots.response[slot], move)

@@ -92,11 +92,8 @@ class ContactProblem:
 
     def relative_velocities(self, V: np.ndarray) -> np.ndarray:
         """w_c = v^α − v^β from the row velocities V (walls: their prescribed velocity)."""
-        va = np.where((self.a_slot >= 0)[:, None],
-                      V[self.k_off[np.maximum(self.a_slot, 0)] + self.a_col], self.wall_va)
-        vb = np.where((self.b_slot >= 0)[:, None],
-                      V[self.k_off[np.maximum(self.b_slot, 0)] + self.b_col], self.wall_vb)
-        return va - vb
+        return relative_velocities(self.a_slot, self.a_col, self.b_slot, self.b_col,
+                                   self.k_off, self.wall_va, self.wall_vb, V)
 
     def velocities(self, P: np.ndarray) -> np.ndarray:
         """w(P) (n, d), the relative velocities the impulses P give."""
@@ -182,6 +179,16 @@ def row_impulses(a_slot: np.ndarray, a_col: np.ndarray, b_slot: np.ndarray, b_co
     np.add.at(Q, k_off[a_slot[a]] + a_col[a], P[a])
     np.add.at(Q, k_off[b_slot[b]] + b_col[b], -P[b])
     return Q
+
+
+def relative_velocities(a_slot: np.ndarray, a_col: np.ndarray, b_slot: np.ndarray,
+                        b_col: np.ndarray, k_off: np.ndarray, wall_va: np.ndarray,
+                        wall_vb: np.ndarray, V: np.ndarray) -> np.ndarray:
+    """w_c = v^α − v^β (n, d) from the body row velocities V; a kinematic side (slot −1)
+    moves at its wall velocity."""
+    va = np.where((a_slot >= 0)[:, None], V[k_off[np.maximum(a_slot, 0)] + a_col], wall_va)
+    vb = np.where((b_slot >= 0)[:, None], V[k_off[np.maximum(b_slot, 0)] + b_col], wall_vb)
+    return va - vb
 
 
 def contact_frames(normal: np.ndarray) -> np.ndarray:

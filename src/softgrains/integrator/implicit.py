@@ -347,36 +347,6 @@ class BodyStep:
             self._v_affine = (kappa, v0)
         return self._v_affine
 
-    def apply_impulses(self, rows: np.ndarray, Q: np.ndarray,
-                       response: np.ndarray | None = None, move: bool = True) -> None:
-        """Add impulse changes Q (k, d) at distinct active ``rows`` (−P in R for θ, −P/(γΔt)
-        for Newmark) and move the iterate by the linear response, so that the velocities
-        seen by the Gauss–Seidel sweep stay consistent with u.
-
-        ``response`` (from :meth:`contact_response`) is A⁻¹ at the rows' dofs; without it the
-        lumped relation moves only the rows: Δu = w Q/(c_m m). With ``move`` False (warm
-        start) u stays and the next Newton update takes the impulses in. The residual is
-        refreshed; a move that would invert a point is not made (the impulses still enter b).
-        """
-        w = self.impulse_weight
-        self.b[rows] += w * Q
-        self.contact_impulse[rows] += Q
-        if not move:
-            self.refresh()
-            return
-        u_before = self.u.copy()
-        if response is None:
-            self.u[rows] += w * Q / (self.c_m * self.m[rows])
-        else:
-            self.u += (response @ Q.ravel()).reshape(self.u.shape)
-        self.u[self.fixed] = self.dt * self.vbar[self.fixed]
-        self.refresh()
-        if self.jmin <= 0.0 or not np.isfinite(self.rnorm):
-            # the linear response would invert a point: keep u, the impulses stay in b and
-            # the next Newton update (with its line search) takes them in
-            self.u = u_before
-            self.refresh()
-
     def contact_response(self, rows: np.ndarray, delassus: bool
                          ) -> tuple[np.ndarray | None, np.ndarray]:
         """The impulse-to-iterate map X = w A⁻¹ E (or None for the lumped relation) and the
@@ -495,7 +465,22 @@ class BodyStep:
         return sp.bsr_matrix((data, self.indices, self.indptr), shape=(size, size))
 
     def newton_update(self) -> None:
-        """One Newton iteration: tangent, linear solve, line search."""
+        """One Newton iteration: tangent, linear solve, line search (with ``tangent =
+        "auto"``, see :meth:`newton_direction` and :meth:`take_step`)."""
+        self.take_step(self.newton_direction())
+
+    def newton_direction(self) -> np.ndarray:
+        """du = −A⁻¹ R(u) with the Newton matrix at the iterate (its factorization is kept
+        for the contact response). With ``tangent = "auto"`` a failed exact-tangent solve is
+        made again with the projected tangent, which stays for the rest of the step."""
+        try:
+            return self._direction()
+        except SimulationError:
+            if not self.use_projected_tangent():
+                raise
+            return self._direction()
+
+    def _direction(self) -> np.ndarray:
         A = self._A = self.newton_matrix()
         solver, res = self.stepper.solver, self.result
         try:
@@ -506,11 +491,43 @@ class BodyStep:
                 f"Newton iteration {res.iterations}: {err}", step=self.step,
                 body=self.stepper.name, residuals=res.residuals) from err
         self._lu = solver.last_factorization
-        res.iterations += 1
         res.linear_method = solver.last_method
         res.linear_iterations += solver.last_iterations
+        return du
+
+    def take_step(self, du: np.ndarray) -> None:
+        """u ← u + α du by the line search (one Newton iteration). With ``tangent = "auto"``,
+        when every trial inverts a point (an indefinite exact-tangent Newton matrix under
+        compression), the iterate stays and the projected tangent is used from here on."""
+        self.result.iterations += 1
+        before = (self.u, self.r, self.rnorm, self.jmin, self.pi)
         self.u, _, self.r, self.rnorm, self.jmin, self.pi = line_search(
             self.u, du, self.r, self.pi, self.internal_force, self.residual, self.potential)
+        if self.jmin <= 0.0 and self.use_projected_tangent():
+            self.u, self.r, self.rnorm, self.jmin, self.pi = before
+
+    def add_impulses(self, rows: np.ndarray, Q: np.ndarray) -> None:
+        """Add impulse changes Q (k, d) at distinct active ``rows`` to b (−P in R for θ,
+        −P/(γΔt) for Newmark); R and Π are affine in b, so they follow without a new
+        evaluation of the internal force."""
+        w = self.impulse_weight
+        self.b[rows] += w * Q
+        self.contact_impulse[rows] += Q
+        self.r[rows] -= w * Q
+        self.r[self.fixed] = 0.0
+        self.rnorm = float(np.linalg.norm(self.r))
+        self.pi -= float(np.sum(w * Q * self.u[rows]))
+
+    def impulse_move(self, rows: np.ndarray, Q: np.ndarray,
+                     response: np.ndarray | None) -> np.ndarray:
+        """Δu caused by impulse changes Q at ``rows``: X Q with the response X = w A⁻¹ E of
+        :meth:`contact_response` (Delassus), or w Q/(c_m m) at the rows alone (lumped)."""
+        if response is not None:
+            return (response @ Q.ravel()).reshape(self.u.shape)
+        move = np.zeros_like(self.u)
+        move[rows] = self.impulse_weight * Q / (self.c_m * self.m[rows])
+        move[self.fixed] = 0.0
+        return move
 
     # -- G2P ---------------------------------------------------------------------------
     def finish(self) -> BodyStepResult:
