@@ -141,6 +141,8 @@ def _run_one(case, out: Path, resume: bool = False) -> int:
     if summary["status"] == "interrupted":
         _error(f"{summary['message']}; continue with: softgrains run ... --out {out} --resume")
         return 128 + (sim.stop_signal or 2)
+    if summary["status"] != "completed":  # completed with unconverged steps
+        print(f"{summary['status']}: {summary['message']}")
     print(f"results in {out}")
     return EXIT_OK
 
@@ -162,7 +164,8 @@ def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
         statuses = []
         for path, out, future in zip(paths, outs, futures, strict=True):
             status, message = future.result()
-            outcome = ("done" if status == EXIT_OK else "interrupted" if status > 128
+            outcome = (("done" if not message else "done, with warnings")
+                       if status == EXIT_OK else "interrupted" if status > 128
                        else "invalid case" if status == EXIT_INVALID else "FAILED")
             print(f"{path}: {outcome} -> {out}"
                   + (f"\n  {message}" if message else ""))
@@ -190,7 +193,7 @@ def _child_run(path: str, overrides: list[str], out: str, threads: int,
         return EXIT_INVALID, str(error)
     if summary["status"] == "interrupted":
         return 128 + (sim.stop_signal or 2), str(summary["message"])
-    return EXIT_OK, ""
+    return EXIT_OK, str(summary["message"])
 
 
 def _draw(run_dirs: list[Path], out: Path | None) -> None:

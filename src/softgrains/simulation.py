@@ -385,6 +385,15 @@ class Simulation:
                 log.warning("the run reached its end (simulation.end_time / steps) in the %s "
                             "phase before the protocol's stop criterion; raise end_time to "
                             "go further", self.protocol.phase)
+            if status == "completed" and self.unconverged_contact_steps:
+                # on_failure = "warn": never a plain "completed"
+                status = f"completed with {self.unconverged_contact_steps} unconverged steps"
+                message = ("the coupled contact loop did not converge on "
+                           f"{self.unconverged_contact_steps} steps, which were kept "
+                           "([contact] on_failure = \"warn\"); their rows have "
+                           "contact_converged = 0 in series.csv")
+                if log is not None:
+                    log.warning("%s", message)
             checkpoint(_time.perf_counter() - t0)
         except SimulationError as err:
             status = "failed"

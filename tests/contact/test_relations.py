@@ -210,3 +210,16 @@ def test_stacked_disks_boundary_gap(d_over_h, seeding, removal, tolerance, betwe
     low, high = between_range
     assert low < between < high
     assert abs(on_slab) < min(max(abs(low), abs(high)), 0.05)
+
+
+def test_a_run_with_unconverged_steps_never_ends_as_plain_completed(tmp_path):
+    """on_failure = "warn" keeps an unconverged step; the run's status then says how many
+    (summary.json, run.log) and the contact problems are left for replay."""
+    case = _disk_dropped_on_slab("lumped", dt=0.01, max_iterations=2, on_failure="warn").case
+    sim = Simulation(case, out=tmp_path)
+    summary = sim.run()
+    n = summary["unconverged_contact_steps"]
+    assert n > 0 and summary["status"] == f"completed with {n} unconverged steps"
+    assert "contact_converged = 0" in summary["message"]
+    assert f"did not converge on {n} steps" in (tmp_path / "run.log").read_text()
+    assert len(list((tmp_path / "contact_problems").glob("step_*.npz"))) == n

@@ -266,3 +266,17 @@ def test_missing_phi_column_is_a_case_error(tmp_path: Path) -> None:
     (folder / "series.csv").write_text("step,time,phase\n0,0.0,compaction\n")
     with pytest.raises(CaseError, match=r"nophi.*missing compaction columns phi, stress_yy"):
         plot_compaction([folder], tmp_path / "out")
+
+
+def test_a_run_with_unconverged_steps_says_so_in_its_label(tmp_path: Path) -> None:
+    """on_failure = "warn" runs: the number of unconverged steps (contact_converged = 0)
+    follows the run's name into every legend and title."""
+    folder = _make_run(tmp_path / "a", "A", snapshots=0)
+    _add_column(folder, "contact_converged", 0.0, "phi")  # every row unconverged
+    run = _load_run(folder)
+    assert run.label == f"A ({len(run.series['phi'])} unconverged steps)"
+    labels = [t.get_text() for t in _phi_sigma_figure([run]).axes[0].get_legend().get_texts()]
+    assert labels[0] == run.label
+    clean = _make_run(tmp_path / "b", "B", snapshots=0)
+    _add_column(clean, "contact_converged", 1.0, "phi")  # φ > 0: converged rows
+    assert _load_run(clean).label == "B"

@@ -1,19 +1,23 @@
-"""Contact and bulk together: the nonlinear Gauss–Seidel loop of ALGORITHM.md §6.
+"""Contact and bulk together: the coupled loop of ALGORITHM.md §6, each iteration a Newton
+step of the bodies with a complete solve of the contact problem.
 
-    set up every deformable body's step; find the contact nodes, normals and gaps;
+    set up every deformable body's step; find the contact nodes, normals and gaps; the gap
+        bias b = (g + (1 − θ)Δt w_n^n)/(θΔt) keeps the end-of-step gap of the integrator's
+        own displacement ≥ 0 (overlaps clipped or partly removed, gap.py)
     warm start: the impulses of the previous step at the same (node, α, β) enter b
-    repeat (outer iteration k):
-        one Newton update of every body not yet converged (with the current impulses)
-        each body in contact: its local compliance W at its contact rows
-            lumped: diag(1/m);  Delassus: κ w [A⁻¹]_cc from the LU of its Newton matrix
-        Gauss–Seidel sweeps over the contacts with W (gauss_seidel.py) until the impulses
-            settle; the summed impulse changes Q move each body's iterate by X Q
-            (X = w A⁻¹ E, Delassus) or by w Q/(c_m m) at the rows (lumped)
-    until ‖P^k − P^{k−1}‖∞ ≤ tol ‖P^k‖∞ + floor and every body's residual has converged
+    repeat (iteration k):
+        every body not converged: its Newton direction du = −A⁻¹ R(u; P) (A factorised)
+        each body in contact: its compliance W at its contact rows
+            Delassus: κ w [A⁻¹]_cc from that factorization;  lumped: diag(1/m)
+        the contact problem (problem.py) on the rows' velocities predicted at u + du,
+            solved completely (solvers.py: semismooth Newton by default)
+        each body: the combined step du + X ΔQ = −A⁻¹ R(u; P_new) through the line search
+    until the contacts' complementarity (natural-map) residual ≤ tol and every body's
+    residual ≤ tol × the largest impulse
 
 Kinematic bodies take no impulse response (W = 0): their nodal velocity is their prescribed
-velocity. With the gap treatment (gap.py, on by default) a contact acts only when the
-bodies' boundaries would meet within the step.
+velocity. With ``tangent = "auto"`` the bodies switch to the projected tangent within a
+step whose contact solves keep failing (an indefinite W) or that needs many iterations.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
 
 IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
-AUTO_TANGENT_ITERATIONS = 25  # tangent = "auto": projected after this many iterations
+AUTO_TANGENT_ITERATIONS = 10  # tangent = "auto": projected after this many iterations
 AUTO_TANGENT_FAILED_SOLVES = 2  # ... or after this many unconverged contact solves
 SOLVE_TOLERANCE_FRACTION = 0.1  # each contact solve to this fraction of the loop's tolerance
 

@@ -14,7 +14,9 @@ max_c ‖Φ_c‖ ≤ tolerance · max_c ‖P_c‖.
   backtracking line search on ½‖Φ‖². Its convergence does not depend on the conditioning
   of W (a free grain between walls at Δt c/h ~ 10³ gives cond(W) ~ 10⁶, where Gauss–Seidel
   needs ~10⁶ sweeps); frictionless problems are solved in a finite number of steps (an
-  active-set method). Dimension-generic (the 3D cone's projection is exact).
+  active-set method). With friction it can stall (no global convergence for the
+  non-associated Coulomb law): then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps continue
+  from its best iterate. Dimension-generic (the 3D cone's projection is exact).
 - ``nsgs``: nonlinear Gauss–Seidel over contacts with the exact local solution
   (gauss_seidel.py).
 """
@@ -39,6 +41,7 @@ from softgrains.contact.problem import (
 
 METHODS = ("newton", "nsgs")
 LINE_SEARCH_HALVINGS = 12
+NSGS_FALLBACK_SWEEPS = 500  # Gauss–Seidel sweeps after a Newton solve that did not converge
 STAGNATION_ITERATIONS = 6  # Newton stops when its best residual is this many iterations old
 
 
@@ -78,7 +81,17 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
         return ContactResult(P, np.zeros(0, np.int64), 0, 0.0, True)
     if options.method == "nsgs":
         return _nsgs(problem, P, options)
-    return _newton(problem, P, options)
+    result = _newton(problem, P, options)
+    if result.converged:
+        return result
+    # the Alart–Curnier Newton has no global convergence with Coulomb friction (seen
+    # stalling at 3e-2 on a frictional compaction step whose problem Gauss–Seidel solves in
+    # 540 sweeps); Gauss–Seidel from its best iterate, the better of the two returned
+    sweeps = _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
+        "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor))
+    best = sweeps if sweeps.residual < result.residual else result
+    return ContactResult(best.impulse, best.status, result.iterations + sweeps.iterations,
+                         best.residual, best.converged, result.history + sweeps.history)
 
 
 def contact_status(problem: ContactProblem, P: np.ndarray) -> np.ndarray:

@@ -191,8 +191,9 @@ class BodyStep:
     Set-up (P2G, active nodes, Dirichlet values, R = c_m M u − b − s f^int) happens at
     construction; :meth:`converged` records the residual and checks the stopping test;
     :meth:`newton_update` makes one Newton iteration with line search; :meth:`finish` moves
-    the points (G2P). The contact loop (contact/coupling.py) interleaves its Gauss–Seidel
-    sweeps with :meth:`newton_update` and passes the impulses on with :meth:`apply_impulses`.
+    the points (G2P). The contact loop (contact/coupling.py) takes :meth:`newton_direction`,
+    solves the contacts, adds the impulse changes with :meth:`add_impulses` and moves the
+    iterate with :meth:`take_step` along the direction plus :meth:`impulse_move`.
     """
 
     def __init__(self, stepper: BodyStepper, pts: BodyPoints, gravity: np.ndarray, dt: float,
@@ -376,13 +377,6 @@ class BodyStep:
                 self._A = self.newton_matrix()
             self._lu = spla.splu(self._A.tocsc(), permc_spec="MMD_AT_PLUS_A")
         return self._lu
-
-    def refresh(self) -> None:
-        """Recompute the residual and potential after impulses changed b and u."""
-        f_int, self.jmin, w_int = self.internal_force(self.u, False)
-        self.r = self.residual(self.u, f_int)
-        self.rnorm = float(np.linalg.norm(self.r))
-        self.pi = self.potential(self.u, w_int)
 
     # -- Newton ------------------------------------------------------------------------
     @property

@@ -127,6 +127,10 @@ def _load_run(folder: str | Path) -> _Run:
     series, compaction = _read_series(folder)
     protocol = _read_protocol(folder)
     label = str(protocol.get("label") or "").strip() or folder.name
+    if "contact_converged" in series:  # on_failure = "warn": said in every legend/title
+        unconverged = int(np.sum(series["contact_converged"] == 0))
+        if unconverged:
+            label += f" ({unconverged} unconverged steps)"
     return _Run(
         folder=folder,
         label=label,
