@@ -224,9 +224,11 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                    max_iterations=settings.solver_iterations, floor=floor)
     done = {i: b.converged(limit=False) for i, b in steps.items()}
     failed_solves = 0
+    in_contact = set(slots.bodies)
     for k in range(1, settings.max_iterations + 1):
         # the Newton direction of every body not converged, with the current impulses
-        du = {i: b.newton_direction() for i, b in steps.items() if not done[i]}
+        du = {i: b.newton_direction(direct=delassus and i in in_contact)
+              for i, b in steps.items() if not done[i]}
         for slot, body in enumerate(slots.bodies):
             s, rows = steps[body], slots.rows[slot]
             if slots.W[slot] is None or (delassus and body in du):
@@ -324,5 +326,5 @@ def _problem(slots: _Slots, contacts: ContactNodes, wall_va: np.ndarray, wall_vb
         k_off=slots.k_off, k_size=slots.k_size,
         w_off=np.r_[0, np.cumsum([w.size for w in slots.W])][:-1].astype(np.int64),
         W=np.concatenate([w.ravel() for w in slots.W]), V_free=V.copy())
-    problem.V_free -= problem.compliance_times(problem.row_impulses(P))
+    problem.V_free -= problem.compliance_times(problem.row_impulses(P))  # nothing cached yet
     return problem

@@ -23,7 +23,7 @@ Dimension-generic (2D, and 3D with its circular cone).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 
 import numpy as np
@@ -58,6 +58,13 @@ class ContactProblem:
     w_off: np.ndarray
     W: np.ndarray
     V_free: np.ndarray
+    # quantities derived from the data above, computed once (treat a problem as immutable)
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+
+    def _cached(self, name: str, compute):
+        if name not in self._cache:
+            self._cache[name] = compute()
+        return self._cache[name]
 
     @property
     def n_contacts(self) -> int:
@@ -103,6 +110,9 @@ class ContactProblem:
     def touches(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Every (contact, body slot, column, sign) where a contact touches a deformable
         body (sign +1 on the α side, −1 on β), grouped by slot."""
+        return self._cached("touches", self._touches)
+
+    def _touches(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         a, b = self.a_slot >= 0, self.b_slot >= 0
         contact = np.r_[np.flatnonzero(a), np.flatnonzero(b)]
         slot = np.r_[self.a_slot[a], self.b_slot[b]]
@@ -138,6 +148,9 @@ class ContactProblem:
 
     def diagonal_blocks(self) -> np.ndarray:
         """W_cc (n, d, d): each contact's own compliance, Σ of its bodies' diagonal blocks."""
+        return self._cached("Wcc", self._diagonal_blocks)
+
+    def _diagonal_blocks(self) -> np.ndarray:
         d = self.dim
         contact, slot, col, _ = self.touches()
         kd = self.k_size[slot] * d
@@ -150,17 +163,17 @@ class ContactProblem:
 
     def free_velocity(self) -> np.ndarray:
         """q = w(0) (n, d): the relative velocities without any impulse of this problem."""
-        return self.relative_velocities(self.V_free)
+        return self._cached("q", lambda: self.relative_velocities(self.V_free))
 
     def frames(self) -> np.ndarray:
         """(n, d, d): each contact's orthonormal frame, rows n, t1 (, t2)."""
-        return contact_frames(self.normal)
+        return self._cached("frames", lambda: contact_frames(self.normal))
 
     # -- files ------------------------------------------------------------------------
     def save(self, path: str | Path) -> None:
         """Write the problem to an .npz file (replay it with :meth:`load`)."""
         np.savez_compressed(path, format_version=FORMAT_VERSION,
-                            **{f.name: getattr(self, f.name) for f in fields(self)})
+                            **{f.name: getattr(self, f.name) for f in fields(self) if f.init})
 
     @classmethod
     def load(cls, path: str | Path) -> ContactProblem:
@@ -168,7 +181,7 @@ class ContactProblem:
             if int(data["format_version"]) != FORMAT_VERSION:
                 raise ValueError(f"{path}: contact problem format {int(data['format_version'])}"
                                  f", this version reads {FORMAT_VERSION}")
-            return cls(**{f.name: data[f.name] for f in fields(cls)})
+            return cls(**{f.name: data[f.name] for f in fields(cls) if f.init})
 
 
 def row_impulses(a_slot: np.ndarray, a_col: np.ndarray, b_slot: np.ndarray, b_col: np.ndarray,
@@ -257,6 +270,10 @@ def natural_map_residual(problem: ContactProblem, P: np.ndarray, w: np.ndarray |
 
 def normal_masses(problem: ContactProblem) -> np.ndarray:
     """1/(n·W_cc n) per contact (where no body can move there, the largest finite one)."""
+    return problem._cached("rho", lambda: _normal_masses(problem))
+
+
+def _normal_masses(problem: ContactProblem) -> np.ndarray:
     Wcc = problem.diagonal_blocks()
     wnn = np.einsum("ci,cij,cj->c", problem.normal, Wcc, problem.normal)
     positive = wnn > 0.0
@@ -269,6 +286,10 @@ def impulse_scale(problem: ContactProblem) -> float:
     velocities call for, max_c ρ_c max(0, −(q_n + b)), and at least the impulse a relative
     error of VELOCITY_RESOLUTION in the contact's velocities would give (w̃_n = w_n + b is
     a difference of two terms that nearly cancel at a resting contact)."""
+    return problem._cached("impulse_scale", lambda: _impulse_scale(problem))
+
+
+def _impulse_scale(problem: ContactProblem) -> float:
     q = problem.free_velocity()
     q_n = np.einsum("ci,ci->c", q, problem.normal) + problem.bias
     rho = normal_masses(problem)

@@ -463,22 +463,23 @@ class BodyStep:
         "auto"``, see :meth:`newton_direction` and :meth:`take_step`)."""
         self.take_step(self.newton_direction())
 
-    def newton_direction(self) -> np.ndarray:
+    def newton_direction(self, direct: bool = False) -> np.ndarray:
         """du = −A⁻¹ R(u) with the Newton matrix at the iterate (its factorization is kept
-        for the contact response). With ``tangent = "auto"`` a failed exact-tangent solve is
-        made again with the projected tangent, which stays for the rest of the step."""
+        for the contact response; ``direct`` asks for the LU). With ``tangent = "auto"`` a
+        failed exact-tangent solve is made again with the projected tangent, which stays for
+        the rest of the step."""
         try:
-            return self._direction()
+            return self._direction(direct)
         except SimulationError:
             if not self.use_projected_tangent():
                 raise
-            return self._direction()
+            return self._direction(direct)
 
-    def _direction(self) -> np.ndarray:
+    def _direction(self, direct: bool) -> np.ndarray:
         A = self._A = self.newton_matrix()
         solver, res = self.stepper.solver, self.result
         try:
-            du = solver.solve(A, -self.r.ravel(), self.diag_slot).reshape(self.u.shape)
+            du = solver.solve(A, -self.r.ravel(), self.diag_slot, direct).reshape(self.u.shape)
         except (np.linalg.LinAlgError, RuntimeError) as err:
             raise SimulationError(
                 f"step {self.step}: linear solve of body '{self.stepper.name}' failed at "

@@ -37,8 +37,11 @@ class LinearSolver:
         self.last_iterations = 0
         self.last_factorization = None  # the LU of the last direct solve (contact reuses it)
 
-    def solve(self, A: sp.bsr_matrix, b: np.ndarray, diag_slot: np.ndarray) -> np.ndarray:
-        if not self.use_direct:
+    def solve(self, A: sp.bsr_matrix, b: np.ndarray, diag_slot: np.ndarray,
+              direct: bool = False) -> np.ndarray:
+        """x = A⁻¹ b; ``direct`` forces the LU (a body in contact needs it for its Delassus
+        compliance anyway: CG first would be spent for nothing)."""
+        if not (self.use_direct or direct):
             x, info, its = self._cg(A, b, diag_slot)
             if info == 0:
                 self.last_method, self.last_iterations = "cg", its
