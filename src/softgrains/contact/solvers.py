@@ -3,7 +3,7 @@
     result = solve(problem, P0, ContactSolverOptions(method=..., tolerance=...))
 
 Every solver stops on the shared natural-map residual (problem.residual_norm):
-max_c ‖Φ_c‖ ≤ tolerance · max_c ‖P_c‖.
+max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the free velocities).
 
 - ``newton`` (default): semismooth Newton on the Alart–Curnier function, in each contact's
   frame (r = (r_n, r_t), w̃_n = w_n + b, ρ_c = 1/(n·W_cc n)):
