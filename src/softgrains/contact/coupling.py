@@ -139,6 +139,10 @@ class _Slots:
         self.response: list[np.ndarray | None] = [None] * len(body_ids)
         self.W: list[np.ndarray | None] = [None] * len(body_ids)
 
+    def span(self, slot: int) -> slice:
+        """Body ``slot``'s rows in the arrays over all contact rows (V, Q)."""
+        return slice(self.k_off[slot], self.k_off[slot] + self.k_size[slot])
+
 
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls: dict,
                   settings: CouplingSettings, friction: Callable, step: int, dt: float,
@@ -192,8 +196,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     # g + Δt[(1 − θ) w_n^n + θ w_n^{n+1}] ≥ 0  ⇔  w_n^{n+1} + (g + (1 − θ)Δt w_n^n)/(θΔt) ≥ 0
     theta = _velocity_weight(next(iter(steps.values())).settings)
     for slot, body in enumerate(slots.bodies):
-        V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = \
-            steps[body].v_n[slots.rows[slot]]
+        V[slots.span(slot)] = steps[body].v_n[slots.rows[slot]]
     start = np.einsum("ci,ci->c", relative_velocities(
         slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off, wall_va, wall_vb,
         V), contacts.normal)
@@ -215,8 +218,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         Q = row_impulses(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off,
                          P, k_total)
         for slot, body in enumerate(slots.bodies):
-            steps[body].add_impulses(slots.rows[slot], Q[slots.k_off[slot]:slots.k_off[slot]
-                                                         + slots.k_size[slot]])
+            steps[body].add_impulses(slots.rows[slot], Q[slots.span(slot)])
 
     delassus = settings.relation == "delassus"
     options = ContactSolverOptions(method=settings.solver,
@@ -237,7 +239,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             v = s.node_velocity(rows)
             if body in du:
                 v = v + s.velocity_affine()[0] * du[body][rows]
-            V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = v
+            V[slots.span(slot)] = v
         problem = _problem(slots, contacts, wall_va, wall_vb, bias, mu, V, P)
         result = solve(problem, P, options)
         failed_solves += result.residual > settings.tolerance
@@ -256,7 +258,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # du + X ΔQ = −A⁻¹ R(u; P_new), taken with the line search
         change = problem.row_impulses(result.impulse - P)
         for slot, body in enumerate(slots.bodies):
-            q = change[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]]
+            q = change[slots.span(slot)]
             if not np.any(q):
                 continue
             s, rows = steps[body], slots.rows[slot]
@@ -270,8 +272,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # the complementarity error at the velocities the bodies now have (the predicted
         # ones unless the line search shortened a step or the relation is lumped)
         for slot, body in enumerate(slots.bodies):
-            V[slots.k_off[slot]:slots.k_off[slot] + slots.k_size[slot]] = \
-                steps[body].node_velocity(slots.rows[slot])
+            V[slots.span(slot)] = steps[body].node_velocity(slots.rows[slot])
         actual = problem.relative_velocities(V)
         diag.residual = residual_norm(problem, P, actual, floor)
         # a body's residual need not be finer than the impulses it carries (same units)
