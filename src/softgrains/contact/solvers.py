@@ -119,8 +119,11 @@ def _nsgs(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
                             problem.mu, problem.k_off, problem.w_off, problem.k_size, problem.W,
                             V, Q, P, status, 0.0, 0.0, min(chunk, options.max_iterations - sweeps))
         sweeps += n
-        residual = residual_norm(problem, P, problem.relative_velocities(V), options.floor)
+        with np.errstate(over="ignore", invalid="ignore"):
+            residual = residual_norm(problem, P, problem.relative_velocities(V), options.floor)
         history.append(residual)
+        if not np.isfinite(residual):  # diverged (an indefinite W): the caller keeps a
+            return ContactResult(P, status, sweeps, np.inf, False, history)  # better one
     return ContactResult(P, contact_status(problem, P), sweeps, residual,
                          residual <= options.tolerance, history)
 
@@ -170,6 +173,34 @@ def _block_diagonal(blocks: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(n * d, n * d))
 
 
+def _newton_step(lin: _Linearised, rho: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
+    """dr solving J dr = −Φ, J = I − G + G ρ W. A row where G vanishes (an open contact's
+    components) is a row of the identity, dr_i = −Φ_i: only the engaged rows E need a
+    factorization, J_EE dr_E = −Φ_E − J_EO dr_O (most contacts of a dense packing are open:
+    with B-splines the LU of the whole J took 77% of a frictional compaction step)."""
+    n, d, _ = lin.G.shape
+    dr = -lin.phi.ravel()
+    engaged = np.flatnonzero(np.any(lin.G.reshape(n * d, d) != 0.0, axis=1))
+    if engaged.size == 0:
+        return dr
+    open_ = np.setdiff1d(np.arange(n * d), engaged, assume_unique=True)
+    G = _block_diagonal(lin.G)[engaged]
+    J = (sp.identity(n * d, format="csr")[engaged] - G
+         + G @ sp.diags(np.repeat(rho, d)) @ W).tocsc()
+    J_ee = J[:, engaged].tocsc()
+    rhs = dr[engaged] - J[:, open_] @ dr[open_]
+    try:
+        step = spla.splu(J_ee).solve(rhs)
+    except RuntimeError:
+        step = None
+    if step is None or not np.all(np.isfinite(step)):
+        # singular generalized Jacobian (the LU failed or overflowed): a damped
+        # least-squares step
+        step = spla.lsqr(J_ee, rhs, damp=1e-8)[0]
+    dr[engaged] = step
+    return dr
+
+
 def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
             ) -> ContactResult:
     n, d = problem.n_contacts, problem.dim
@@ -196,25 +227,22 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
     residual = residual_norm(problem, to_global(frames, r.reshape(n, d)),
                              to_global(frames, u), options.floor)
     history.append(residual)
-    identity = sp.identity(n * d, format="csr")
     best = (residual, r, iterations)
     while (residual > options.tolerance and iterations < options.max_iterations
            and iterations - best[2] < STAGNATION_ITERATIONS):
         iterations += 1
-        G = _block_diagonal(lin.G)
-        J = (identity - G + G @ sp.diags(np.repeat(rho, d)) @ W).tocsc()
-        try:
-            dr = spla.splu(J).solve(-lin.phi.ravel())
-        except RuntimeError:  # singular generalized Jacobian: a damped least-squares step
-            dr = spla.lsqr(J, -lin.phi.ravel(), damp=1e-8)[0]
+        dr = _newton_step(lin, rho, W)
         step = 1.0
         for _ in range(LINE_SEARCH_HALVINGS):
             r_try = r + step * dr
-            u_try, lin_try = evaluate(r_try)
-            merit_try = 0.5 * float(np.sum(lin_try.phi ** 2))
-            if merit_try <= (1.0 - 1e-4 * step) * merit:
+            with np.errstate(over="ignore", invalid="ignore"):  # a near-singular J's step
+                u_try, lin_try = evaluate(r_try)
+                merit_try = 0.5 * float(np.sum(lin_try.phi ** 2))
+            if merit_try <= (1.0 - 1e-4 * step) * merit:  # False when not finite
                 break
             step *= 0.5
+        if not np.isfinite(merit_try):
+            break  # no finite trial along the direction: the best iterate stands
         r, u, lin, merit = r_try, u_try, lin_try, merit_try
         residual = residual_norm(problem, to_global(frames, r.reshape(n, d)),
                                  to_global(frames, u), options.floor)
