@@ -54,6 +54,7 @@ SERIES_COLUMNS = [
     "n_contacts", "kinetic_energy", "strain_energy", "gravity_energy", "total_energy",
     "momentum_x", "momentum_y", "newton_residual", "linear_solver", "contact_sweeps",
     "contact_nodes", "contact_sticking", "contact_sliding", "contact_converged", "wall_time",
+    "wall_work", "contact_dissipation",
 ]
 
 
@@ -76,6 +77,12 @@ class Simulation:
         self.protocol = None
         self._protocol_row: dict[str, object] = {}
         self.unconverged_contact_steps = 0
+        # since the start: the kinematic walls' work on the bodies through contact, and the
+        # energy the contacts took out (coupling._contact_work); with the energies of the
+        # deformable bodies E: ΔE = wall_work − contact_dissipation − the integrator's own
+        # dissipation (θ > 1/2, PIC)
+        self.wall_work = 0.0
+        self.contact_dissipation = 0.0
         self.resumed_from: int | None = None  # the checkpoint's step when resumed
         self.checkpoint_step: int | None = None  # the step of the last checkpoint written
         self.retried_steps = 0  # steps retried with a halved Δt (retry_halvings)
@@ -118,6 +125,7 @@ class Simulation:
             "contact_nodes": dg.contact.n_contacts, "contact_sticking": dg.contact.sticking,
             "contact_sliding": dg.contact.sliding,
             "contact_converged": int(dg.contact.converged), "wall_time": wall_time,
+            "wall_work": self.wall_work, "contact_dissipation": self.contact_dissipation,
             **self._protocol_observables(),
         }
 
@@ -206,6 +214,8 @@ class Simulation:
                 "grid.", kind="nan", step=step, body=body.name, point=p - body.points.start)
         if not dg.contact.converged:
             self.unconverged_contact_steps += 1
+        self.wall_work += dg.contact.wall_work
+        self.contact_dissipation += dg.contact.dissipation
         if self.protocol is not None:
             m, s = self.model, self.state
             grains = m.deformable_points

@@ -81,6 +81,8 @@ class ContactDiagnostics:
     converged: bool = True
     message: str = ""
     problem: ContactProblem | None = None  # the last iteration's, kept when not converged
+    wall_work: float = 0.0  # work of the kinematic walls' contact forces over the step
+    dissipation: float = 0.0  # energy the contacts took out of the bodies over the step
 
 
 @dataclass
@@ -304,10 +306,30 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         if settings.on_failure == "stop":
             raise SimulationError(diag.message, kind="contact", step=step,
                                   body=name_a, other=name_b, contact_problem=problem)
+    diag.wall_work, diag.dissipation = _contact_work(steps, slots, contacts, P, wall_va,
+                                                     wall_vb, dt)
     diag.active = int(np.sum(np.any(P != 0.0, axis=1)))
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))
     return ContactState(contacts, P, status, gaps), diag
+
+
+def _contact_work(steps: dict, slots: _Slots, contacts: ContactNodes, P: np.ndarray,
+                  wall_va: np.ndarray, wall_vb: np.ndarray, dt: float) -> tuple[float, float]:
+    """The step's wall work and contact dissipation from the contact forces P/Δt and the
+    displacements u of the step (the bodies' at their contact rows, Δt v for a wall):
+        W_wall = Σ_{β wall} P·u_β/Δt − Σ_{α wall} P·u_α/Δt,
+        D = −Σ_c P·(u_α − u_β)/Δt,
+    so that the deformable bodies receive W_wall − D from the contacts. (D > 0: energy
+    taken out, e.g. by friction; D < 0: put in, e.g. by overlap removal.)"""
+    U = np.zeros((int(slots.k_size.sum()), contacts.normal.shape[1]))
+    for slot, body in enumerate(slots.bodies):
+        U[slots.span(slot)] = steps[body].u[slots.rows[slot]]
+    relative = relative_velocities(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
+                                   slots.k_off, wall_va * dt, wall_vb * dt, U)
+    wall_b, wall_a = slots.b_slot < 0, slots.a_slot < 0
+    work = float(np.sum(P[wall_b] * wall_vb[wall_b]) - np.sum(P[wall_a] * wall_va[wall_a]))
+    return work, -float(np.sum(P * relative)) / dt
 
 
 def _velocity_weight(settings) -> float:
