@@ -9,7 +9,9 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import signal
 import sys
+import threading
 from collections.abc import Callable, Sequence
 from importlib import metadata
 from pathlib import Path
@@ -158,19 +160,37 @@ def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
     print(f"running {len(paths)} cases, {min(jobs, len(paths))} at once, {threads} "
           f"thread(s) each; logs in {', '.join(str(o / 'run.log') for o in outs)}")
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        futures = [pool.submit(_child_run, str(p), list(overrides), str(o), threads, resume)
-                   for p, o in zip(paths, outs, strict=True)]
-        statuses = []
-        for path, out, future in zip(paths, outs, futures, strict=True):
-            status, message = future.result()
-            outcome = (("done" if not message else "done, with warnings")
-                       if status == EXIT_OK else "interrupted" if status > 128
-                       else "invalid case" if status == EXIT_INVALID else "FAILED")
-            print(f"{path}: {outcome} -> {out}"
-                  + (f"\n  {message}" if message else ""))
-            statuses.append(status)
+    # SIGTERM sent to this process alone (kill, a batch system) is passed on to the
+    # workers, which stop cleanly after their step; SIGINT from a terminal reaches them
+    # all already (one process group)
+    forwarding = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _forward_to_workers) if forwarding else None
+    try:
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            futures = [pool.submit(_child_run, str(p), list(overrides), str(o), threads,
+                                   resume)
+                       for p, o in zip(paths, outs, strict=True)]
+            statuses = []
+            for path, out, future in zip(paths, outs, futures, strict=True):
+                status, message = future.result()
+                outcome = (("done" if not message else "done, with warnings")
+                           if status == EXIT_OK else "interrupted" if status > 128
+                           else "invalid case" if status == EXIT_INVALID else "FAILED")
+                print(f"{path}: {outcome} -> {out}"
+                      + (f"\n  {message}" if message else ""))
+                statuses.append(status)
+    finally:
+        if forwarding:
+            signal.signal(signal.SIGTERM, previous)
     return statuses
+
+
+def _forward_to_workers(signum: int, frame) -> None:
+    """Send ``signum`` on to this process's live children (the pool's workers)."""
+    import multiprocessing
+
+    for child in multiprocessing.active_children():
+        os.kill(child.pid, signum)
 
 
 def _child_run(path: str, overrides: list[str], out: str, threads: int,

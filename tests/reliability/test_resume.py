@@ -153,3 +153,26 @@ def test_checkpoint_is_replaced_atomically(tmp_path, monkeypatch):
     arrays, meta = module.read_checkpoint(path)
     assert meta["step"] == 1 and arrays["state/x"].tolist() == [0.0, 1.0, 2.0]
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_sigterm_to_a_run_of_several_cases_stops_every_worker_cleanly(tmp_path):
+    """`softgrains run A B` killed with SIGTERM (the parent only, as kill or a batch system
+    does) passes the signal on: each case stops after its step with a checkpoint and the
+    status "interrupted", and the command exits with 128 + SIGTERM. (Before, the parent
+    died at once and its workers ran on to the end.)"""
+    cases = [write_case(tmp_path / f"{name}.toml", COMPACTION) for name in ("a", "b")]
+    root = tmp_path / "out"
+    env = dict(os.environ, NUMBA_NUM_THREADS="1")
+    process = subprocess.Popen(
+        [sys.executable, "-m", "softgrains", "run", *map(str, cases), "--out", str(root),
+         "--no-figures", "--jobs", "2"], env=env, stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE, text=True)
+    for name in ("a", "b"):
+        wait_for_row(process, root / name, 3)
+    process.send_signal(signal.SIGTERM)
+    assert process.wait(timeout=300) == 128 + signal.SIGTERM
+    for name in ("a", "b"):
+        summary = json.loads((root / name / "summary.json").read_text())
+        assert summary["status"] == "interrupted" and "SIGTERM" in summary["message"]
+        assert summary["steps"] < COMPACTION["simulation"]["steps"]
+        assert (root / name / "checkpoint.h5").is_file()
