@@ -19,7 +19,7 @@ import argparse
 import time
 
 import numpy as np
-from squeeze_convergence import R, squeeze_case, wave_speed
+from squeeze_convergence import R, print_table, squeeze_case, wave_speed
 
 from softgrains import Simulation, checkpointing, load_case
 
@@ -79,12 +79,7 @@ def main() -> None:
                     checkpointing.restore(start, *saved)
                     row = regime(start, dtch, args.steps)
                     rows.append({"D/h": d_over_h, "shape": shape, "μ": mu, **row})
-    keys = list(rows[0])
-    print("| " + " | ".join(keys) + " |")
-    print("| " + " | ".join("---" for _ in keys) + " |")
-    for r in rows:
-        print("| " + " | ".join(f"{v:.3g}" if isinstance(v, float) else str(v)
-                                for v in r.values()) + " |")
+    print_table(rows, digits=3)
     print(f"(plates closing at min(1e-3 c, 0.1 h/Δt) from {PRESQUEEZE:.0%} of D; "
           f"R = {R} m, c = {wave_speed():.1f} m/s)")
 

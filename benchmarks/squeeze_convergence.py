@@ -117,6 +117,16 @@ def run(d_over_h: int, dt_c_over_h: float, travel: float, overrides: dict | None
             "wall [s]": wall}
 
 
+def print_table(rows: list[dict], digits: int = 4) -> None:
+    """The rows (same keys) as a Markdown table, floats to ``digits`` significant digits."""
+    keys = list(rows[0])
+    print("| " + " | ".join(keys) + " |")
+    print("| " + " | ".join("---" for _ in keys) + " |")
+    for r in rows:
+        print("| " + " | ".join(f"{v:.{digits}g}" if isinstance(v, float) else str(v)
+                                for v in r.values()) + " |")
+
+
 def _value(text: str) -> float | str:
     """A --set value: a number where it reads as one, else the text (e.g. bspline2)."""
     try:
@@ -136,12 +146,7 @@ def main() -> None:
     args = parser.parse_args()
     overrides = {k: _value(v) for k, v in (item.split("=", 1) for item in args.set)}
     results = [run(dh, dtch, args.travel, overrides) for dtch in args.dtch for dh in args.dh]
-    keys = list(results[0])
-    print("| " + " | ".join(keys) + " |")
-    print("| " + " | ".join("---" for _ in keys) + " |")
-    for r in results:
-        print("| " + " | ".join(f"{v:.4g}" if isinstance(v, float) else str(v)
-                                for v in r.values()) + " |")
+    print_table(results)
 
 
 if __name__ == "__main__":

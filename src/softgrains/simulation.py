@@ -54,7 +54,7 @@ SERIES_COLUMNS = [
     "n_contacts", "kinetic_energy", "strain_energy", "gravity_energy", "total_energy",
     "momentum_x", "momentum_y", "newton_residual", "linear_solver", "contact_sweeps",
     "contact_nodes", "contact_sticking", "contact_sliding", "contact_converged", "wall_time",
-    "wall_work", "contact_dissipation",
+    "wall_work", "contact_dissipation", "least_contact_gap",
 ]
 
 
@@ -83,6 +83,7 @@ class Simulation:
         # dissipation (θ > 1/2, PIC)
         self.wall_work = 0.0
         self.contact_dissipation = 0.0
+        self.largest_penetration = 0.0  # −(least gap at an active contact) over the run, m
         self.resumed_from: int | None = None  # the checkpoint's step when resumed
         self.checkpoint_step: int | None = None  # the step of the last checkpoint written
         self.retried_steps = 0  # steps retried with a halved Δt (retry_halvings)
@@ -126,6 +127,7 @@ class Simulation:
             "contact_sliding": dg.contact.sliding,
             "contact_converged": int(dg.contact.converged), "wall_time": wall_time,
             "wall_work": self.wall_work, "contact_dissipation": self.contact_dissipation,
+            "least_contact_gap": _least_active_gap(dg.contacts),
             **self._protocol_observables(),
         }
 
@@ -216,6 +218,8 @@ class Simulation:
             self.unconverged_contact_steps += 1
         self.wall_work += dg.contact.wall_work
         self.contact_dissipation += dg.contact.dissipation
+        self.largest_penetration = max(self.largest_penetration,
+                                       -_least_active_gap(dg.contacts, default=0.0))
         if self.protocol is not None:
             m, s = self.model, self.state
             grains = m.deformable_points
@@ -404,6 +408,10 @@ class Simulation:
                            "contact_converged = 0 in series.csv")
                 if log is not None:
                     log.warning("%s", message)
+            if log is not None and self.model.contact is not None:
+                log.info("largest overlap at a contact carrying an impulse: %.3g h (the "
+                         "contact's own boundary-gap estimate; series.csv "
+                         "least_contact_gap)", self.largest_penetration / self.model.lattice.h)
             checkpoint(_time.perf_counter() - t0)
         except SimulationError as err:
             status = "failed"
@@ -488,12 +496,23 @@ class Simulation:
             "checkpoint_errors": self.checkpoint_errors,
             "retried_steps": self.retried_steps,
             "smallest_dt_factor": self.smallest_dt_factor,
+            "largest_contact_penetration_h": self.largest_penetration / self.model.lattice.h,
             "protocol": self.protocol.summary() if self.protocol is not None else None,
             "software": software_versions(),
         }
 
 
 _STEP_IN_NAME = re.compile(r"_(\d+)\.(vtu|csv)$")
+
+
+def _least_active_gap(contacts, default: float = math.nan) -> float:
+    """The least boundary gap (m) at the contacts that carry an impulse this step, measured
+    at the start of the step, i.e. where the previous step left them (gap.py; < 0: an
+    estimated overlap); ``default`` when no contact carries one."""
+    if contacts is None or len(contacts.nodes) == 0 or contacts.gap.size == 0:
+        return default
+    active = np.any(contacts.impulse != 0.0, axis=1)
+    return float(contacts.gap[active].min()) if active.any() else default
 
 
 def _step_of(name: str) -> int:

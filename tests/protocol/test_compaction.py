@@ -141,6 +141,10 @@ def test_series_and_summary_carry_the_compaction_observables(run):
     assert np.all((series["rattler_fraction"] >= 0) & (series["rattler_fraction"] <= 1))
     summary = json.loads((out / "summary.json").read_text())
     assert summary["protocol"]["sigma0"] == 5e3 and summary["protocol"]["label"] == "μ = 0"
+    # the run's largest overlap at an active contact is the least gap series.csv shows
+    least = np.nanmin(series["least_contact_gap"])
+    assert summary["largest_contact_penetration_h"] == pytest.approx(
+        max(0.0, -least) / 2e-3, rel=1e-9, abs=1e-12)
 
 
 def test_a_run_capped_by_end_time_says_so(tmp_path):

@@ -53,6 +53,10 @@ def test_squeezed_disk_force_follows_the_finite_element_reference(dt_c_over_h):
     window = (strain >= 0.05 - 1e-9) & (strain <= 0.30 + 1e-9)
     error = force[window] / np.interp(strain[window], reference[:, 0], reference[:, 1]) - 1.0
     assert np.abs(error).max() < BAR, np.round(error, 4)
+    # the contact's own end-of-step gap at the active contacts: quasi-static ≥ −0.041 h
+    # (linear hats −0.225 h); dynamic −0.056 h, above D10's 0.05 h (docs/dev-notes.md)
+    if dt_c_over_h >= 1000.0:
+        assert sim.largest_penetration < 0.05 * sim.model.lattice.h
 
 
 def test_wall_work_is_the_bodies_energy_plus_what_contacts_dissipate():

@@ -9,20 +9,22 @@ import numpy as np
 from softgrains.contact.detection import node_position
 from softgrains.contact.local_law import SLIP, STICK
 
-CONTACT_COLUMNS = ["step", "time", "alpha", "beta", "x", "y", "nx", "ny", "fn", "ft", "status"]
+CONTACT_COLUMNS = ["step", "time", "alpha", "beta", "x", "y", "nx", "ny", "fn", "ft", "status",
+                   "gap"]
 STATUS_NAMES = {STICK: "stick", SLIP: "slip"}
 
 
 def contact_records(model, contacts, dt: float) -> dict[str, np.ndarray]:
     """Arrays over the contacts with P ≠ 0: position, normal, force, f_n, f_t, status code,
-    α and β body indices."""
+    α and β body indices, and the boundary gap at the start of the step (gap.py; < 0: an
+    estimated overlap; 0 without the gap treatment)."""
     d = model.dim
     if contacts is None or len(contacts.nodes) == 0:
         empty = np.zeros(0)
         return {"position": np.zeros((0, d)), "normal": np.zeros((0, d)),
                 "force": np.zeros((0, d)), "fn": empty, "ft": empty,
                 "status": np.zeros(0, np.int32), "alpha": np.zeros(0, np.int32),
-                "beta": np.zeros(0, np.int32)}
+                "beta": np.zeros(0, np.int32), "gap": empty}
     keep = np.any(contacts.impulse != 0.0, axis=1)
     nodes = contacts.nodes
     normal = nodes.normal[keep]
@@ -36,7 +38,7 @@ def contact_records(model, contacts, dt: float) -> dict[str, np.ndarray]:
             "force": force, "fn": fn, "ft": ft,
             "status": contacts.status[keep].astype(np.int32),
             "alpha": nodes.alpha[keep].astype(np.int32),
-            "beta": nodes.beta[keep].astype(np.int32)}
+            "beta": nodes.beta[keep].astype(np.int32), "gap": contacts.gap[keep]}
 
 
 def contact_rows(model, state, records: dict[str, np.ndarray]) -> list[dict[str, object]]:
@@ -49,7 +51,8 @@ def contact_rows(model, state, records: dict[str, np.ndarray]) -> list[dict[str,
                      "alpha": names[records["alpha"][k]], "beta": names[records["beta"][k]],
                      "x": x[0], "y": x[1], "nx": n[0], "ny": n[1], "fn": records["fn"][k],
                      "ft": records["ft"][k],
-                     "status": STATUS_NAMES.get(int(records["status"][k]), "open")})
+                     "status": STATUS_NAMES.get(int(records["status"][k]), "open"),
+                     "gap": records["gap"][k]})
     return rows
 
 
