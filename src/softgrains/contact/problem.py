@@ -299,12 +299,28 @@ def _impulse_scale(problem: ContactProblem) -> float:
 
 def residual_norm(problem: ContactProblem, P: np.ndarray, w: np.ndarray | None = None,
                   floor: float = 0.0) -> float:
-    """max_c ‖Φ_c‖ / max(max_c ‖P_c‖, impulse_scale, floor): the relative complementarity
-    error (the scale of the free velocities keeps it meaningful where all impulses are
-    nearly zero, e.g. when a contact is about to open)."""
+    """The relative complementarity error, the larger of
+        max_c ‖Φ_c‖ / max(max_c ‖P_c‖, impulse_scale, floor)      (impulses) and
+        max_c ‖Φ_c‖/ρ_c / max_c (‖w_c‖, ‖q_c‖ + |b_c|)          (velocities).
+    The first alone misses a violated constraint where the contact's own compliance W_cc is
+    huge (ρ_c tiny): a body whose rigid mode carries only its mass term M/(θΔt)² at
+    Δt c/h ~ 10⁴ let a plate pass into it by its full travel each step with Φ/P ~ 1e-6.
+    Φ_c/ρ_c is the contact's velocity error (w̃_n where it presses and should not move
+    closer, W_cc r where it carries an impulse it should not). The impulse scale keeps the
+    first meaningful where all impulses are nearly zero (e.g. a contact about to open)."""
     if problem.n_contacts == 0:
         return 0.0
-    phi = natural_map_residual(problem, P, w)
+    if w is None:
+        w = problem.velocities(P)
+    phi = np.linalg.norm(natural_map_residual(problem, P, w), axis=1)
     largest = float(np.linalg.norm(P, axis=1).max())
     scale = max(largest, impulse_scale(problem), floor, 1e-300)
-    return float(np.linalg.norm(phi, axis=1).max()) / scale
+    speed = max(float(np.linalg.norm(w, axis=1).max()), velocity_scale(problem))
+    velocity = float(np.max(phi / normal_masses(problem))) / speed if speed > 0.0 else 0.0
+    return max(float(phi.max()) / scale, velocity)
+
+
+def velocity_scale(problem: ContactProblem) -> float:
+    """max_c ‖q_c‖ + |b_c|: the free relative velocities with the gap bias."""
+    return problem._cached("velocity_scale", lambda: float(np.max(
+        np.linalg.norm(problem.free_velocity(), axis=1) + np.abs(problem.bias))))
