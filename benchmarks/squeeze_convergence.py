@@ -45,7 +45,7 @@ def squeeze_case(d_over_h: int, dt_c_over_h: float, travel: float, strain: float
     dt = dt_c_over_h * h / wave_speed()
     speed = travel * h / dt
     steps = int(np.ceil(strain * 2 * R / (2 * travel * h) - 1e-9))
-    size = 2 * R + 8 * h
+    size = 2.6 * R + 8 * h  # room for the disk widening under the plates (~1.2 D at 30%)
     c = size / 2
     plate = {"shape": "rectangle", "material": "gel", "kind": "kinematic"}
     case = {
