@@ -145,6 +145,12 @@ class _Slots:
         """Body ``slot``'s rows in the arrays over all contact rows (V, Q)."""
         return slice(self.k_off[slot], self.k_off[slot] + self.k_size[slot])
 
+    def stack(self, value: Callable) -> np.ndarray:
+        """value(body, its contact rows) of every body in contact, stacked in slot order:
+        an array over all contact rows (e.g. their velocities V)."""
+        return np.concatenate([value(body, rows)
+                               for body, rows in zip(self.bodies, self.rows, strict=True)])
+
 
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls: dict,
                   settings: CouplingSettings, friction: Callable, step: int, dt: float,
@@ -193,15 +199,12 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         if slots.b_slot[c] < 0:
             wall_vb[c] = walls[int(contacts.beta[c])][0]
     k_total = int(slots.k_size.sum())
-    V = np.zeros((k_total, d))
     # the gap predicted at the end of the step by the integrator's own displacement,
     # g + Δt[(1 − θ) w_n^n + θ w_n^{n+1}] ≥ 0  ⇔  w_n^{n+1} + (g + (1 − θ)Δt w_n^n)/(θΔt) ≥ 0
     theta = _velocity_weight(next(iter(steps.values())).settings)
-    for slot, body in enumerate(slots.bodies):
-        V[slots.span(slot)] = steps[body].v_n[slots.rows[slot]]
     start = np.einsum("ci,ci->c", relative_velocities(
         slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off, wall_va, wall_vb,
-        V), contacts.normal)
+        slots.stack(lambda body, rows: steps[body].v_n[rows])), contacts.normal)
     predicted = gaps + (1.0 - theta) * dt * start
     bias = effective_gaps(predicted, settings.overlap_removal,
                           settings.overlap_tolerance * lattice.h) / (theta * dt)
@@ -234,14 +237,12 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         du = {i: b.newton_direction(direct=delassus and i in in_contact)
               for i, b in steps.items() if not done[i]}
         for slot, body in enumerate(slots.bodies):
-            s, rows = steps[body], slots.rows[slot]
             if slots.W[slot] is None or (delassus and body in du):
-                slots.response[slot], slots.W[slot] = s.contact_response(rows, delassus)
-            # the contact rows' velocities at the end of that Newton step (linear prediction)
-            v = s.node_velocity(rows)
-            if body in du:
-                v = v + s.velocity_affine()[0] * du[body][rows]
-            V[slots.span(slot)] = v
+                slots.response[slot], slots.W[slot] = steps[body].contact_response(
+                    slots.rows[slot], delassus)
+        # the contact rows' velocities at the end of that Newton step (linear prediction)
+        V = slots.stack(lambda body, rows, du=du: _predicted_velocity(steps[body], rows,
+                                                                      du.get(body)))
         problem = _problem(slots, contacts, wall_va, wall_vb, bias, mu, V, P)
         result = solve(problem, P, options)
         failed_solves += result.residual > settings.tolerance
@@ -273,9 +274,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         diag.iterations = k
         # the complementarity error at the velocities the bodies now have (the predicted
         # ones unless the line search shortened a step or the relation is lumped)
-        for slot, body in enumerate(slots.bodies):
-            V[slots.span(slot)] = steps[body].node_velocity(slots.rows[slot])
-        actual = problem.relative_velocities(V)
+        actual = problem.relative_velocities(
+            slots.stack(lambda body, rows: steps[body].node_velocity(rows)))
         diag.residual = residual_norm(problem, P, actual, floor)
         # a body's residual need not be finer than the impulses it carries (same units)
         p_scale = settings.tolerance * float(np.abs(P).max())
@@ -306,25 +306,28 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         if settings.on_failure == "stop":
             raise SimulationError(diag.message, kind="contact", step=step,
                                   body=name_a, other=name_b, contact_problem=problem)
-    diag.wall_work, diag.dissipation = _contact_work(steps, slots, contacts, P, wall_va,
-                                                     wall_vb, dt)
+    diag.wall_work, diag.dissipation = _contact_work(steps, slots, P, wall_va, wall_vb, dt)
     diag.active = int(np.sum(np.any(P != 0.0, axis=1)))
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))
     return ContactState(contacts, P, status, gaps), diag
 
 
-def _contact_work(steps: dict, slots: _Slots, contacts: ContactNodes, P: np.ndarray,
-                  wall_va: np.ndarray, wall_vb: np.ndarray, dt: float) -> tuple[float, float]:
+def _predicted_velocity(step, rows: np.ndarray, du: np.ndarray | None) -> np.ndarray:
+    """v^{n+1} at ``rows`` after the Newton direction du (none: at the current iterate)."""
+    v = step.node_velocity(rows)
+    return v if du is None else v + step.velocity_affine()[0] * du[rows]
+
+
+def _contact_work(steps: dict, slots: _Slots, P: np.ndarray, wall_va: np.ndarray,
+                  wall_vb: np.ndarray, dt: float) -> tuple[float, float]:
     """The step's wall work and contact dissipation from the contact forces P/Δt and the
     displacements u of the step (the bodies' at their contact rows, Δt v for a wall):
         W_wall = Σ_{β wall} P·u_β/Δt − Σ_{α wall} P·u_α/Δt,
         D = −Σ_c P·(u_α − u_β)/Δt,
     so that the deformable bodies receive W_wall − D from the contacts. (D > 0: energy
     taken out, e.g. by friction; D < 0: put in, e.g. by overlap removal.)"""
-    U = np.zeros((int(slots.k_size.sum()), contacts.normal.shape[1]))
-    for slot, body in enumerate(slots.bodies):
-        U[slots.span(slot)] = steps[body].u[slots.rows[slot]]
+    U = slots.stack(lambda body, rows: steps[body].u[rows])
     relative = relative_velocities(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
                                    slots.k_off, wall_va * dt, wall_vb * dt, U)
     wall_b, wall_a = slots.b_slot < 0, slots.a_slot < 0

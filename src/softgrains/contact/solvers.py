@@ -187,7 +187,7 @@ def _newton_step(lin: _Linearised, rho: np.ndarray, W: sp.csr_matrix) -> np.ndar
     G = _block_diagonal(lin.G)[engaged]
     J = (sp.identity(n * d, format="csr")[engaged] - G
          + G @ sp.diags(np.repeat(rho, d)) @ W).tocsc()
-    J_ee = J[:, engaged].tocsc()
+    J_ee = J[:, engaged]
     rhs = dr[engaged] - J[:, open_] @ dr[open_]
     try:
         step = spla.splu(J_ee).solve(rhs)
