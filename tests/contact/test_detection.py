@@ -79,6 +79,46 @@ def test_boundary_gap_between_ring_seeded_disks_at_any_angle(angle, gap):
     assert found == pytest.approx(gap, abs=0.05 * delta)
 
 
+@pytest.mark.parametrize("angle", [0.0, 20.0, 37.0, 45.0, 60.0])
+def test_boundary_gap_never_reports_an_overlap_between_separated_grains(angle):
+    """Two lattice-seeded disks (B-splines, R = 4.5 h and 3.5 h) whose cells are half a cell
+    apart (circles 0.6 h apart along a line at ``angle``): no contact node, with its
+    mass-gradient normal, reports an overlap. A body with no point on the line through a
+    node is absent there (open gap); falling back to all points within the reach, as before
+    session 7, gave −0.48 h at 0° and −0.57 h at 60°."""
+    from softgrains.contact.gap import boundary_gaps
+
+    n = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+    c, gap = np.array([1.513, 1.513]), 0.6 * H
+    fa, xa = _field(0, Disk(c + (0.45 + gap / 2) * n, 0.45), kind=1)
+    fb, xb = _field(1, Disk(c - (0.35 + gap / 2) * n, 0.35), kind=1)
+    contacts = find_contact_nodes(LAT, [fa, fb])
+    assert len(contacts) > 5
+    gaps = boundary_gaps(LAT, contacts, {0: xa, 1: xb}, H / 2, 1.5 * H * np.sqrt(2))
+    assert gaps.min() >= 0.0
+
+
+def test_a_normal_pointing_from_alpha_to_beta_is_turned_towards_alpha():
+    """gap.oriented_normals: n·(x̄_α − x̄_β) must be > 0 near the node; a reversed normal is
+    replaced by the direction between the local centroids, a right one and a wall's kept."""
+    from softgrains.contact.detection import ContactNodes
+    from softgrains.contact.gap import near_points, oriented_normals
+
+    _, xa = _field(0, Rectangle(np.array([1.0, 1.0]), np.array([1.5, 2.0])))
+    _, xb = _field(1, Rectangle(np.array([1.5, 1.0]), np.array([2.0, 2.0])))
+    node = np.rint((np.array([1.5, 1.5]) - LAT.node_origin) / H).astype(int)
+    index = np.full(3, node[0] + LAT.n_nodes[0] * node[1])
+    given = np.array([[1.0, 0.0], [-0.8, 0.6], [1.0, 0.0]])
+    contacts = ContactNodes(index, np.zeros(3, np.int64), np.ones(3, np.int64), given,
+                            np.zeros(3, np.int64), np.zeros(3, np.int64))
+    X = np.tile(LAT.node_origin + H * node, (3, 1))
+    points = {0: xa, 1: xb}
+    near = near_points(contacts, X, points, 1.5 * H)
+    normal = oriented_normals(contacts, X, points, near, np.array([False, False, True]))
+    assert np.allclose(normal[0], [-1.0, 0.0], atol=1e-12)
+    assert np.allclose(normal[1:], given[1:])
+
+
 def test_effective_gap_removes_only_the_overlap_beyond_the_tolerance():
     """g̃ = g (gap), 0 (overlap within t), r (g + t) (deeper overlap), NaN → 0."""
     from softgrains.contact.gap import effective_gaps

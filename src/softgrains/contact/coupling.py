@@ -23,7 +23,7 @@ step whose contact solves keep failing (an indefinite W) or that needs many iter
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -33,7 +33,12 @@ from softgrains.contact.detection import (
     find_contact_nodes,
     node_position,
 )
-from softgrains.contact.gap import boundary_gaps, effective_gaps
+from softgrains.contact.gap import (
+    boundary_gaps,
+    effective_gaps,
+    near_points,
+    oriented_normals,
+)
 from softgrains.contact.local_law import SLIP, STICK
 from softgrains.contact.problem import (
     ContactProblem,
@@ -187,8 +192,14 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         for s in steps.values():
             s.solve()
         return ContactState(contacts, P, status, np.zeros(0)), diag
-    gaps = (boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies)
-            if gap_points is not None else np.zeros(n))
+    gaps = np.zeros(n)
+    if gap_points is not None:
+        X = node_position(lattice, contacts.node)
+        near = near_points(contacts, X, gap_points, reach)
+        at_wall = np.isin(contacts.alpha, list(walls)) | np.isin(contacts.beta, list(walls))
+        contacts = replace(contacts, normal=oriented_normals(contacts, X, gap_points, near,
+                                                             at_wall))
+        gaps = boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies, near)
     mu = np.asarray(friction(contacts.alpha, contacts.beta), float)
     slots = _Slots(steps, contacts)
     wall_va = np.zeros((n, d))
