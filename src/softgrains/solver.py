@@ -67,7 +67,7 @@ class Solver:
         self.coupling = CouplingSettings() if c is None else CouplingSettings(
             relation=c.local_relation, tolerance=c.tolerance, max_iterations=c.max_iterations,
             on_failure=c.on_failure, normal=c.normal, overlap_removal=c.overlap_removal,
-            overlap_tolerance=c.overlap_tolerance, solver=c.solver,
+            overlap_tolerance=c.overlap_tolerance, keep_closed=c.keep_closed, solver=c.solver,
             solver_iterations=c.solver_iterations)
 
     def body_points(self, state: State, index: int) -> BodyPoints:

@@ -212,6 +212,50 @@ def test_stacked_disks_boundary_gap(d_over_h, seeding, removal, tolerance, betwe
     assert abs(on_slab) < min(max(abs(low), abs(high)), 0.05)
 
 
+def _disk_sliding_on_block(keep_closed):
+    """A lattice-seeded disk (R = 0.2 m, D/h = 10, E = 0.1 MPa) launched at 0.5 m/s along a
+    frictionless deformable block (held by a kinematic slab, μ = 1 between them) under
+    gravity, θ = 1, Δt = 10 ms, 1 s: it slides 0.5 m (12 cells) across the lattice."""
+    return Simulation(load_case({
+        "simulation": {"dt": 0.01, "end_time": 1.0, "theta": 1.0},
+        "grid": {"cell_size": 0.04, "origin": [0.0, 0.0], "size": [2.0, 1.0]},
+        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [{"name": "disk", "shape": "disk", "center": [0.4, 0.7], "radius": 0.2,
+                    "material": "gel", "velocity": [0.5, 0.0]},
+                   {"name": "block", "shape": "rectangle", "lower": [0.1, 0.3],
+                    "upper": [1.9, 0.5], "material": "gel"},
+                   {"name": "slab", "shape": "rectangle", "lower": [0.05, 0.2],
+                    "upper": [1.95, 0.3], "material": "gel", "kind": "kinematic"}],
+        "gravity": {"acceleration": [0.0, -10.0]},
+        "contact": {"keep_closed": keep_closed,
+                    "pairs": [{"bodies": ["block", "slab"], "friction": 1.0}]},
+    }))
+
+
+def test_a_loaded_sliding_contact_is_not_ratcheted_by_the_gap_scatter():
+    """contact.keep_closed (session 7): a contact loaded at the previous step starts closed
+    (its gap the integrator's prediction, 0) unless the fresh estimate finds an overlap.
+    Without it, each step where the estimate's scatter says "open" lets the bodies approach
+    by that much, and the clipped overlap is never undone: the sliding disk sinks into the
+    block. Measured (2026-12-02): −0.094 h with, −0.189 h without, after 1 s (the boundary
+    gap along the vertical through the disk's centre, points ± δ/2). D10's 0.05 h is not met
+    by this sliding case yet (docs/dev-notes.md, Known problems); the test asserts the
+    mechanism: with keep_closed the sink is at most 0.6 of the sink without it."""
+    sink = {}
+    for keep in (True, False):
+        sim = _disk_sliding_on_block(keep)
+        for _ in range(sim.n_steps):
+            sim.step()
+        h, delta = sim.model.lattice.h, sim.model.lattice.h / 2
+        disk, block = (sim.state.x[sim.model.bodies[i].points] for i in (0, 1))
+        centre = disk[:, 0].mean()
+        bottom = disk[np.abs(disk[:, 0] - centre) <= 1.5 * delta, 1].min() - delta / 2
+        top = block[np.abs(block[:, 0] - centre) <= 1.5 * delta, 1].max() + delta / 2
+        sink[keep] = (top - bottom) / h
+        assert centre > 0.7  # it slid
+    assert 0.0 < sink[True] < 0.6 * sink[False]
+
+
 def test_a_run_with_unconverged_steps_never_ends_as_plain_completed(tmp_path):
     """on_failure = "warn" keeps an unconverged step; the run's status then says how many
     (summary.json, run.log) and the contact problems are left for replay."""

@@ -292,6 +292,11 @@ class ContactSettings(_Section):
     pairs: list[FrictionPair] = Field(default_factory=list,
                                       description="friction of named body pairs")
     gap: bool = Field(True, description="act only when the boundaries meet (ALGORITHM.md §4)")
+    keep_closed: bool = Field(
+        False, description="a contact that carried an impulse at the previous step starts "
+        "the step closed (gap 0: the integrator's end-of-step prediction) unless the fresh "
+        "estimate says the bodies overlap, so that the estimate's scatter cannot ratchet "
+        "loaded bodies into each other (opt-in while it is measured: docs/dev-notes.md)")
     overlap_removal: float = Field(
         0.0, ge=0.0, le=1.0, description="fraction of an estimated overlap between two "
         "bodies removed per step (0: overlaps are only kept from growing)")

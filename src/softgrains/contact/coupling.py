@@ -3,7 +3,8 @@ step of the bodies with a complete solve of the contact problem.
 
     set up every deformable body's step; find the contact nodes, normals and gaps; the gap
         bias b = (g + (1 − θ)Δt w_n^n)/(θΔt) keeps the end-of-step gap of the integrator's
-        own displacement ≥ 0 (overlaps clipped or partly removed, gap.py)
+        own displacement ≥ 0 (overlaps clipped or partly removed, gap.py); a contact loaded
+        at the previous step starts closed, g = min(estimate, 0) (keep_closed)
     warm start: the impulses of the previous step at the same (node, α, β) enter b
     repeat (iteration k):
         every body not converged: its Newton direction du = −A⁻¹ R(u; P) (A factorised)
@@ -70,6 +71,7 @@ class CouplingSettings:
     normal: str = "difference"
     overlap_removal: float = 0.0  # fraction of an estimated overlap removed per step
     overlap_tolerance: float = 0.0  # overlap (in cells h) left alone by the removal
+    keep_closed: bool = False  # a contact loaded at the previous step starts closed (g ≤ 0)
     solver: str = "newton"  # contact problem solver: newton | nsgs (solvers.py)
     solver_iterations: int = 50  # per contact solve: Newton iterations or NSGS sweeps
 
@@ -216,6 +218,16 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     start = np.einsum("ci,ci->c", relative_velocities(
         slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off, wall_va, wall_vb,
         slots.stack(lambda body, rows: steps[body].v_n[rows])), contacts.normal)
+    # a contact that carried an impulse at the previous step ended it closed: its gap is
+    # the integrator's prediction, 0, unless the fresh estimate finds an overlap. A fresh
+    # estimate > 0 there is mostly its own scatter (points entering or leaving the column),
+    # and clipping only overlaps turned that scatter into a ratchet (session 7).
+    estimated = gaps
+    if settings.keep_closed and warm is not None and len(warm.nodes):
+        loaded = {key for key, p in zip(warm.keys(), warm.impulse, strict=True)
+                  if np.any(p != 0.0)}
+        closed = np.array([key in loaded for key in _keys(contacts)], bool)
+        gaps = np.where(closed, np.minimum(gaps, 0.0), gaps)
     predicted = gaps + (1.0 - theta) * dt * start
     bias = effective_gaps(predicted, settings.overlap_removal,
                           settings.overlap_tolerance * lattice.h) / (theta * dt)
@@ -321,7 +333,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     diag.active = int(np.sum(np.any(P != 0.0, axis=1)))
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))
-    return ContactState(contacts, P, status, gaps), diag
+    return ContactState(contacts, P, status, estimated), diag
 
 
 def _predicted_velocity(step, rows: np.ndarray, du: np.ndarray | None) -> np.ndarray:
