@@ -19,7 +19,7 @@ each, side by side on 2 cores):
 from __future__ import annotations
 
 import argparse
-import json
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -29,18 +29,18 @@ from softgrains.io import read_table
 LEVELS = (1, 5, 10, 20, 40, 60, 100, 200, 300)
 
 
-def rows(run: Path, levels: tuple[int, ...]) -> list[str]:
+def row(run: Path, levels: tuple[int, ...]) -> str:
+    """One table row: the run's cells at each σ_yy/σ0 level and its mean iterations."""
+    with open(run / "case.toml", "rb") as f:
+        case = tomllib.load(f)
+    sigma0, h = case["protocol"]["sigma0"], case["grid"]["cell_size"]
     series = read_table(run / "series.csv")
-    case = json.loads((run / "summary.json").read_text()) if (run / "summary.json").exists() \
-        else {}
-    sigma0 = (case.get("protocol") or {}).get("sigma0", 5e3)
     compaction = series["phase"] == "compaction"
     stress = series["stress_yy"][compaction] / sigma0
     overlap = series["overlap_fraction"][compaction]
     phi = series["phi"][compaction]
     gap = series["least_contact_gap"][compaction]
     its = series["contact_iterations"][compaction]
-    h = _cell_size(run)
     cells = []
     for level in levels:
         reached = np.flatnonzero(stress >= level)
@@ -50,14 +50,7 @@ def rows(run: Path, levels: tuple[int, ...]) -> list[str]:
         else:
             cells.append("—")
     mean_its = f"{its.mean():.1f}" if its.size else "—"
-    return [f"| {run.name} | " + " | ".join(cells) + f" | {mean_its} |"]
-
-
-def _cell_size(run: Path) -> float:
-    for line in (run / "case.toml").read_text().splitlines():
-        if line.strip().startswith("cell_size"):
-            return float(line.split("=")[1])
-    raise ValueError(f"{run}/case.toml: no grid cell_size")
+    return f"| {run.name} | " + " | ".join(cells) + f" | {mean_its} |"
 
 
 def main() -> None:
@@ -70,8 +63,7 @@ def main() -> None:
     print("| run | " + " | ".join(f"{v} σ0" for v in args.levels) + " | its/step |")
     print("| --- |" + " --- |" * (len(args.levels) + 1))
     for run in args.runs:
-        for line in rows(run, tuple(args.levels)):
-            print(line)
+        print(row(run, tuple(args.levels)))
 
 
 if __name__ == "__main__":

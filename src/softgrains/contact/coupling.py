@@ -222,12 +222,15 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     # the integrator's prediction, 0, unless the fresh estimate finds an overlap. A fresh
     # estimate > 0 there is mostly its own scatter (points entering or leaving the column),
     # and clipping only overlaps turned that scatter into a ratchet (session 7).
+    warm_started = warm is not None and len(warm.nodes) > 0
+    if warm_started:  # the previous step's impulses at the same (node, α, β)
+        previous = dict(zip(warm.keys(), warm.impulse, strict=True))
+        for c, key in enumerate(_keys(contacts)):
+            if key in previous:
+                P[c] = previous[key]
     estimated = gaps
-    if settings.keep_closed and warm is not None and len(warm.nodes):
-        loaded = {key for key, p in zip(warm.keys(), warm.impulse, strict=True)
-                  if np.any(p != 0.0)}
-        closed = np.array([key in loaded for key in _keys(contacts)], bool)
-        gaps = np.where(closed, np.minimum(gaps, 0.0), gaps)
+    if settings.keep_closed:
+        gaps = np.where(np.any(P != 0.0, axis=1), np.minimum(gaps, 0.0), gaps)
     predicted = gaps + (1.0 - theta) * dt * start
     bias = effective_gaps(predicted, settings.overlap_removal,
                           settings.overlap_tolerance * lattice.h) / (theta * dt)
@@ -238,11 +241,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         scale = max(scale, float((s.m[rows, 0, None] * np.abs(s.node_velocity(rows))).max()))
     floor = IMPULSE_FLOOR * max(scale, 1e-300)
 
-    if warm is not None and len(warm.nodes):
-        previous = dict(zip(warm.keys(), warm.impulse, strict=True))
-        for c, key in enumerate(_keys(contacts)):
-            if key in previous:
-                P[c] = previous[key]
+    if warm_started:
         Q = row_impulses(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off,
                          P, k_total)
         for slot, body in enumerate(slots.bodies):
