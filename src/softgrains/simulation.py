@@ -54,7 +54,8 @@ SERIES_COLUMNS = [
     "n_contacts", "kinetic_energy", "strain_energy", "gravity_energy", "total_energy",
     "momentum_x", "momentum_y", "newton_residual", "linear_solver", "contact_sweeps",
     "contact_nodes", "contact_sticking", "contact_sliding", "contact_converged", "wall_time",
-    "wall_work", "contact_dissipation", "least_contact_gap",
+    "wall_work", "contact_dissipation", "integrator_dissipation", "transfer_dissipation",
+    "least_contact_gap",
 ]
 
 
@@ -77,12 +78,16 @@ class Simulation:
         self.protocol = None
         self._protocol_row: dict[str, object] = {}
         self.unconverged_contact_steps = 0
-        # since the start: the kinematic walls' work on the bodies through contact, and the
-        # energy the contacts took out (coupling._contact_work); with the energies of the
-        # deformable bodies E: ΔE = wall_work − contact_dissipation − the integrator's own
-        # dissipation (θ > 1/2, PIC)
+        # since the start: the work done on the bodies by the kinematic walls (through
+        # contact) and by prescribed (Dirichlet) nodes, the energy the contacts took out
+        # (coupling._contact_work), the grid update's own dissipation and the loss in the
+        # point ↔ grid transfers (BodyStep.finish); with the energies of the deformable
+        # bodies E (kinetic + strain + gravity):
+        #   ΔE = wall_work − contact_dissipation − integrator_dissipation − transfer_dissipation
         self.wall_work = 0.0
         self.contact_dissipation = 0.0
+        self.integrator_dissipation = 0.0
+        self.transfer_dissipation = 0.0
         self.largest_penetration = 0.0  # −(least gap at an active contact) over the run, m
         self.resumed_from: int | None = None  # the checkpoint's step when resumed
         self.checkpoint_step: int | None = None  # the step of the last checkpoint written
@@ -127,6 +132,8 @@ class Simulation:
             "contact_sliding": dg.contact.sliding,
             "contact_converged": int(dg.contact.converged), "wall_time": wall_time,
             "wall_work": self.wall_work, "contact_dissipation": self.contact_dissipation,
+            "integrator_dissipation": self.integrator_dissipation,
+            "transfer_dissipation": self.transfer_dissipation,
             "least_contact_gap": _least_active_gap(dg.contacts),
             **self._protocol_observables(),
         }
@@ -216,8 +223,11 @@ class Simulation:
                 "grid.", kind="nan", step=step, body=body.name, point=p - body.points.start)
         if not dg.contact.converged:
             self.unconverged_contact_steps += 1
-        self.wall_work += dg.contact.wall_work
+        self.wall_work += dg.contact.wall_work + sum(r.prescribed_work
+                                                     for r in dg.bodies.values())
         self.contact_dissipation += dg.contact.dissipation
+        self.integrator_dissipation += sum(r.integrator_dissipation for r in dg.bodies.values())
+        self.transfer_dissipation += sum(r.transfer_dissipation for r in dg.bodies.values())
         self.largest_penetration = max(self.largest_penetration,
                                        -_least_active_gap(dg.contacts, default=0.0))
         if self.protocol is not None:

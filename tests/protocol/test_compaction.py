@@ -115,22 +115,30 @@ def test_packing_fraction_measures_agree_and_overlap_stays_small(run):
 
 def test_the_top_wall_work_goes_into_the_grains_or_is_dissipated(run):
     """Issue 11 item 6 on a short compaction: from the start of the compaction, the walls'
-    work W = Δ(E_strain + E_kinetic) + D_contact + D_θ, where D_θ ≥ 0 is what θ = 1 itself
-    takes out (the force at the end of each step; exact bookkeeping with θ = 1/2:
-    tests/validation/test_squeeze.py). Frictionless contacts take out only the closing of
-    gaps (D ≥ 0). Measured (2026-12-01): see docs/dev-notes.md."""
+    work W = Δ(E_strain + E_kinetic) + D_contact + D_integrator + D_transfer, term by term
+    from series.csv (D_integrator: what θ = 1 takes out, (θ − ½)ΔvᵀMΔv − (f_θ·u + ΔW) on
+    the grid; D_transfer: kinetic energy lost between points and grid). Frictionless
+    contacts take out only the closing of gaps (D_contact ≥ 0), θ = 1 with the
+    neo-Hookean law only dissipates. Measured (2026-12-02, wall at 0.5 m/s): closed to
+    4e-16 of W; of W = 6.35 J, 36% stored, 12% contacts, 52% integrator, 1% transfers (the
+    collapses in bursts: their kinetic energy is what θ = 1 removes)."""
     _, _, series = run
     comp = np.flatnonzero(series["phase"] == "compaction")
     first, last = comp[0] - 1, comp[-1]
     change = {k: series[k][last] - series[k][first]
-              for k in ("wall_work", "contact_dissipation", "strain_energy", "kinetic_energy")}
-    work, dissipated = change["wall_work"], change["contact_dissipation"]
+              for k in ("wall_work", "contact_dissipation", "integrator_dissipation",
+                        "transfer_dissipation", "strain_energy", "kinetic_energy")}
+    work = change["wall_work"]
     stored = change["strain_energy"] + change["kinetic_energy"]
-    assert work > 0.0 and dissipated >= 0.0
-    integrator = work - dissipated - stored
-    assert integrator >= -1e-3 * work  # θ = 1 never makes energy
-    print(f"work {work:.4g}, contact {dissipated / work:.3g}, integrator "
-          f"{integrator / work:.3g} of it")
+    dissipated = (change["contact_dissipation"] + change["integrator_dissipation"]
+                  + change["transfer_dissipation"])
+    assert work > 0.0 and change["contact_dissipation"] >= 0.0
+    assert change["integrator_dissipation"] >= 0.0
+    assert abs(work - stored - dissipated) < 1e-9 * work
+    print(f"work {work:.4g}: stored {stored / work:.3g}, contact "
+          f"{change['contact_dissipation'] / work:.3g}, integrator "
+          f"{change['integrator_dissipation'] / work:.3g}, transfer "
+          f"{change['transfer_dissipation'] / work:.3g}")
 
 
 def test_series_and_summary_carry_the_compaction_observables(run):

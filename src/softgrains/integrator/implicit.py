@@ -110,6 +110,11 @@ class BodyStepResult:
     residuals: list[float] = field(default_factory=list)
     linear_method: str = ""
     linear_iterations: int = 0
+    # energy the step took out (J; see BodyStep.finish): the grid update's own
+    # dissipation and the loss in the point ↔ grid transfers
+    integrator_dissipation: float = 0.0
+    transfer_dissipation: float = 0.0
+    prescribed_work: float = 0.0  # work of the reactions at prescribed (Dirichlet) nodes
 
 
 def line_search(u, du, r, pi, internal_force, residual, potential):
@@ -231,7 +236,7 @@ class BodyStep:
         if not self.consistent:
             p_n = m * v_n
             q_n = m * a_n
-        f_ext = m * gravity
+        f_ext = self.f_ext = m * gravity
 
         self.indptr, self.indices, self.slot, self.diag_slot = block_pattern(
             active_row, self.box.shape, stepper.s)
@@ -251,7 +256,12 @@ class BodyStep:
             self._Mu = np.empty((n_act, d))
 
         # R(u) = c_m M u − b − s f^int(u) = ∇Π(u),  Π(u) = ½ c_m uᵀMu − b·u + s W(u)
-        f_int_n, _, _ = self.internal_force(np.zeros_like(v_n), False)
+        f_int_n, _, self.w_int_n = self.internal_force(np.zeros_like(v_n), False)
+        # kinetic energy on the points and on the grid at the start (energy bookkeeping);
+        # with the consistent mass the step's grid velocity is M_C⁻¹ p_n, not the lumped v_n
+        self.kinetic_points_n = 0.5 * float(np.sum(pts.mass[:, None] * pts.v * pts.v))
+        self.v_grid_n = self._consistent_velocity(p_n) if self.consistent else v_n
+        self.kinetic_grid_n = 0.5 * float(np.sum(self.v_grid_n * self.mass_times(self.v_grid_n)))
         if self.newmark:  # M a^{n+1} − F^{n+1}
             self.c_m = 1.0 / (st.beta * dt * dt)
             self.s_f = 1.0
@@ -524,9 +534,51 @@ class BodyStep:
         move[self.fixed] = 0.0
         return move
 
+    # -- energy bookkeeping --------------------------------------------------------------
+    def _consistent_velocity(self, p: np.ndarray) -> np.ndarray:
+        """v = M_C⁻¹ p by conjugate gradients (M_C is symmetric positive definite and well
+        conditioned: a few tens of iterations)."""
+        n = p.size
+        op = spla.LinearOperator((n, n), dtype=float, matvec=lambda x: self.mass_times(
+            x.reshape(p.shape)).ravel().copy())
+        v, info = spla.cg(op, p.ravel(), rtol=1e-12, atol=0.0, maxiter=500)
+        return v.reshape(p.shape)
+
+    def grid_dissipation(self) -> float:
+        """Energy the grid update takes out of the body over the step, from the converged u:
+            D = W_g + W_P + W_D − ΔK_grid − ΔW,
+        W_g = (M g)·u the work of gravity, W_P = P·u/Δt that of the contact impulses, W_D
+        that of the reactions at prescribed nodes (R of those rows, as impulses), K_grid =
+        ½ vᵀMv at the start (v^n) and at the end (v^{n+1}) of the step, W the strain energy
+        Σ V⁰ W(F). For the θ-scheme it is
+            D = (θ − ½) ΔvᵀMΔv − (f_θ·u + ΔW),   f_θ = (1 − θ) f^int_n + θ f^int(u):
+        the scheme's numerical damping plus the gap between the internal forces' work and
+        the strain energy over the step (0 for θ = ½ and a quadratic energy; ≥ 0 for θ = 1
+        and a convex one). Tests: tests/validation/test_energy.py."""
+        u, dt = self.u, self.dt
+        f_int, _, w_int = self.internal_force(u, False)
+        reaction = self.c_m * self.mass_times(u) - self.b - self.s_f * f_int
+        if self.consistent:  # θ only: v^{n+1} = (u/Δt − (1 − θ) v^n)/θ with v^n = M_C⁻¹ p_n
+            theta = self.settings.theta
+            v1 = (u / dt - (1.0 - theta) * self.v_grid_n) / theta
+        else:
+            v1 = self.node_velocity(np.arange(u.shape[0]))
+        kinetic_grid = 0.5 * float(np.sum(v1 * self.mass_times(v1)))
+        prescribed = float(np.sum(reaction[self.fixed] * u[self.fixed])) / (
+            self.impulse_weight * dt)
+        work = (float(np.sum(self.f_ext * u)) + float(np.sum(self.contact_impulse * u)) / dt
+                + prescribed)
+        self._kinetic_grid = kinetic_grid
+        self.result.prescribed_work = prescribed
+        return work - (kinetic_grid - self.kinetic_grid_n) - (w_int - self.w_int_n)
+
     # -- G2P ---------------------------------------------------------------------------
     def finish(self) -> BodyStepResult:
-        """Move the points with the converged solution (G2P) and return the diagnostics."""
+        """Move the points with the converged solution (G2P) and return the diagnostics,
+        with the energy the grid update and the transfers took out (the transfers: the
+        points' kinetic energy minus the grid's at the start, the grid's minus the points'
+        at the end; ≥ 0 for PIC)."""
+        self.result.integrator_dissipation = self.grid_dissipation()
         st, d, dt, u, active = self.settings, self.d, self.dt, self.u, self.active
         n_box = self.box.size
         u_box = np.zeros((n_box, d))
@@ -560,6 +612,9 @@ class BodyStep:
                 f"after the step: point {p} (at {_where(pts.x[p])}, J = {J[p]:.3e}); try a "
                 "smaller dt or a finer grid.",
                 kind="inverted", step=self.step, body=self.stepper.name, point=p)
+        kinetic_points = 0.5 * float(np.sum(pts.mass[:, None] * pts.v * pts.v))
+        self.result.transfer_dissipation = (self.kinetic_points_n - self.kinetic_grid_n
+                                            + self._kinetic_grid - kinetic_points)
         return self.result
 
 
