@@ -18,6 +18,7 @@ Contact impulses P come from the coupling loop (contact/coupling.py).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numba
@@ -542,6 +543,10 @@ class BodyStep:
         op = spla.LinearOperator((n, n), dtype=float, matvec=lambda x: self.mass_times(
             x.reshape(p.shape)).ravel().copy())
         v, info = spla.cg(op, p.ravel(), rtol=1e-12, atol=0.0, maxiter=500)
+        if info != 0:
+            warnings.warn(f"step {self.step}: body '{self.stepper.name}': M_C v = p did not "
+                          "converge; its integrator/transfer energy columns are approximate",
+                          RuntimeWarning, stacklevel=2)
         return v.reshape(p.shape)
 
     def grid_dissipation(self) -> float:
