@@ -11,7 +11,9 @@ import pytest
 
 from softgrains.io import read_points_vtu, read_pvd, read_table
 
-EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.toml"))
+EXAMPLES = sorted(p for p in (Path(__file__).resolve().parents[1] / "examples").glob("*.toml")
+                  if not p.stem.startswith("sweep_"))
+SWEEPS = sorted((Path(__file__).resolve().parents[1] / "examples").glob("sweep_*.toml"))
 
 
 def _cli(*args):
@@ -57,3 +59,12 @@ def test_a_failing_run_exits_3_with_a_diagnosis(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == "failed" and "left the grid" in summary["message"]
     assert "left the grid" in (out / "run.log").read_text()
+
+
+@pytest.mark.parametrize("sweep", SWEEPS, ids=[p.stem for p in SWEEPS])
+def test_example_sweeps_are_valid(sweep):
+    """Every member of an example sweep is a valid case (tests/sweep runs a small sweep)."""
+    from softgrains.sweep import load_sweep
+
+    members = load_sweep(sweep).members
+    assert len(members) > 1 and len({m.name for m in members}) == len(members)

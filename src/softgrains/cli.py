@@ -88,13 +88,30 @@ def _parser() -> argparse.ArgumentParser:
         )
 
     plot = commands.add_parser(
-        "plot", help="(re)draw the figures of a run, or compare several compaction runs")
+        "plot", help="(re)draw the figures of a run, compare several compaction runs, or "
+        "redraw a sweep's ensemble statistics")
     plot.add_argument("directories", type=Path, nargs="+", metavar="DIR",
                       help="run output directories")
     plot.add_argument("--out", type=Path, metavar="FIGDIR",
                       help="where the comparison figures go (default: DIR/figures for one "
                       "run, the first run's parent/figures for several)")
     plot.set_defaults(command=_plot)
+
+    sweep = commands.add_parser(
+        "sweep", help="run the members of a sweep file (parameters × seeds) on Dask")
+    sweep.add_argument("sweep", type=Path, metavar="SWEEP.toml", help="the sweep file")
+    sweep.add_argument("--out", type=Path, metavar="DIR",
+                       help="output directory, one folder per member (default: "
+                       "results/<sweep file name without .toml>)")
+    sweep.add_argument("--workers", type=int, default=0, metavar="N",
+                       help="worker processes of the local Dask cluster (default: as many as "
+                       "cores, at most the members to run)")
+    sweep.add_argument("--scheduler", metavar="ADDRESS",
+                       help="an existing Dask scheduler (tcp://host:8786) instead of a local "
+                       "cluster")
+    sweep.add_argument("--threads", type=int, default=1, metavar="T",
+                       help="Numba threads per member (default 1: one member per core)")
+    sweep.set_defaults(command=_sweep)
 
     info = commands.add_parser("info", help="show versions, threads and devices")
     info.set_defaults(command=_info)
@@ -216,6 +233,23 @@ def _child_run(path: str, overrides: list[str], out: str, threads: int,
     return EXIT_OK, str(summary["message"])
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    """``softgrains sweep``: validate the sweep and every member, run them on Dask, print
+    the table of members; non-zero if any failed."""
+    from softgrains.sweep import load_sweep, run_sweep, table
+
+    sweep = load_sweep(args.sweep)
+    out = args.out if args.out is not None else Path("results") / args.sweep.stem
+    outcomes = run_sweep(sweep, out, workers=args.workers, scheduler=args.scheduler,
+                         threads=args.threads)
+    print(table(outcomes))
+    failed = [o for o in outcomes if o.code != EXIT_OK]
+    if failed:
+        _error(f"{len(failed)} of {len(outcomes)} members did not complete (see their "
+               f"run.log); re-run the same command to retry them")
+    return max((o.code for o in outcomes), default=EXIT_OK)
+
+
 def _draw(run_dirs: list[Path], out: Path | None) -> None:
     from softgrains.viz import draw_figures  # heavy: matplotlib
 
@@ -239,6 +273,17 @@ def _plot(args: argparse.Namespace) -> int:
             raise CaseError(f"no such run directory: '{directory}'")
     from softgrains.viz import draw_figures  # heavy: matplotlib
 
+    sweeps = [d for d in args.directories if (d / "sweep.json").is_file()]
+    if sweeps:  # a sweep folder: its ensemble statistics and figures
+        from softgrains.sweep.ensemble import ensemble_statistics
+
+        for directory in sweeps:
+            ensemble_statistics(directory)
+            for path in sorted((directory / "ensemble").glob("*")):
+                print(path)
+        if len(sweeps) == len(args.directories):
+            return EXIT_OK
+        args.directories = [d for d in args.directories if d not in sweeps]
     out = args.out
     if out is None and len(args.directories) > 1:
         out = args.directories[0].parent / "figures"
