@@ -20,6 +20,8 @@ from pathlib import Path
 from softgrains.sweep.spec import Member, Sweep
 
 EXIT_OK, EXIT_INVALID, EXIT_FAILED = 0, 2, 3
+QUIET_WORKERS = {"distributed.worker.profile.enabled": False,
+                 "distributed.admin.system-monitor.gil.enabled": False}
 
 
 @dataclass
@@ -73,6 +75,7 @@ def run_member(base: str, overrides: dict, folder: str, threads: int) -> tuple[i
 def run_sweep(sweep: Sweep, out: Path, workers: int = 0, scheduler: str | None = None,
               threads: int = 1, echo=print) -> list[Outcome]:
     """Run the sweep's members into ``out``; returns their outcomes (also in sweep.json)."""
+    import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
     out.mkdir(parents=True, exist_ok=True)
@@ -86,8 +89,11 @@ def run_sweep(sweep: Sweep, out: Path, workers: int = 0, scheduler: str | None =
             client, cluster = Client(scheduler), None
         else:
             n = workers or min(len(todo), os.cpu_count() or 1)
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                   dashboard_address=":0")
+            # the workers' statistical profiler (every 10 ms) and GIL monitor (every 1 ms)
+            # slowed our Python-heavy steps by a third (benchmarks/sweep_speedup.py)
+            with dask.config.set(QUIET_WORKERS):
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                       dashboard_address=":0")
             client = Client(cluster)
         try:
             echo(f"Dask dashboard: {client.dashboard_link}")
