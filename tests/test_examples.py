@@ -7,6 +7,7 @@ import sys
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from softgrains.io import read_points_vtu, read_pvd, read_table
@@ -43,10 +44,17 @@ def test_example_runs_and_writes_every_output(case, tmp_path):
     x, data = read_points_vtu(out / "snapshots" / snapshots[-1][1])
     assert len(x) == summary["points"] and {"velocity", "stress", "von_mises", "J"} <= set(data)
     assert (out / "run.log").read_text().count("completed") == 1
+    # every deformable body's shape at each snapshot (issue #13)
+    grains = read_table(out / "grains" / "grains_00000003.csv")
+    deformable = set(bodies["body"][bodies["kind"] == "deformable"])
+    assert set(grains["grain"]) == deformable
+    assert np.all(grains["asphericity"] >= 0.99) and np.all(grains["area"] > 0)
     assert tomllib.loads((out / "case.toml").read_text())["simulation"]["dt"] == dt
     plot = _cli("plot", str(out))
     assert plot.returncode == 0, plot.stderr
     assert (out / "figures" / "energy.png").stat().st_size > 1000
+    if "protocol" in data:
+        assert (out / "figures" / "asphericity_phi.png").stat().st_size > 1000
 
 
 def test_a_failing_run_exits_3_with_a_diagnosis(tmp_path):

@@ -43,6 +43,7 @@ from softgrains.observe.bodies import body_columns, body_records
 from softgrains.observe.compaction import COMPACTION_COLUMNS
 from softgrains.observe.contacts import CONTACT_COLUMNS, contact_records, contact_rows
 from softgrains.observe.energies import kinetic_energy, strain_energy
+from softgrains.observe.shapes import GRAIN_COLUMNS, grain_rows
 from softgrains.observe.stress import von_mises
 from softgrains.protocol import UniaxialCompaction
 from softgrains.solver import Solver, StepDiagnostics
@@ -338,6 +339,14 @@ class Simulation:
             for row in contact_rows(self.model, self.state, records):
                 table.append(row)
             table.close()
+            # each grain's shape (issue #13): area, perimeter, asphericity, contacts
+            rows = grain_rows(self.model, self.state, self.last_diagnostics.contacts)
+            if rows:
+                (out / "grains").mkdir(exist_ok=True)
+                table = CsvTable(out / "grains" / f"grains_{step:08d}.csv", GRAIN_COLUMNS)
+                for row in rows:
+                    table.append(row)
+                table.close()
 
         def checkpoint(wall):
             if out is not None and self.checkpoint_step != self.state.step:
@@ -548,7 +557,7 @@ def _save_contact_problem(out: Path | None, step, problem) -> str:
 def _drop_outputs_after(out: Path, step: int) -> None:
     """Delete the snapshot and contact files written after ``step`` (a resumed run writes
     them again)."""
-    for folder in (out / "snapshots", out / "contacts"):
+    for folder in (out / "snapshots", out / "contacts", out / "grains"):
         if folder.is_dir():
             for path in folder.iterdir():
                 if _step_of(path.name) > step:

@@ -78,3 +78,35 @@ def _length(line: np.ndarray) -> float:
 def _shoelace(line: np.ndarray) -> float:
     x, y = line[:, 0], line[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+
+
+GRAIN_COLUMNS = ["step", "time", "grain", "area", "perimeter", "asphericity", "aspect_ratio",
+                 "contacts_grains", "contacts_walls"]
+
+
+def grain_rows(model, state, contacts) -> list[dict[str, object]]:
+    """Rows of grains/grains_<step>.csv: every deformable body's shape descriptors and how
+    many grains and walls press on it (distinct bodies with a contact of P_n > 0)."""
+    if model.dim != 2:
+        return []
+    partners: dict[int, set[int]] = {}
+    if contacts is not None and len(contacts.nodes):
+        n = contacts.nodes.normal
+        pressing = np.einsum("ci,ci->c", contacts.impulse, n) > 0.0
+        for a, b in zip(contacts.nodes.alpha[pressing], contacts.nodes.beta[pressing],
+                        strict=True):
+            partners.setdefault(int(a), set()).add(int(b))
+            partners.setdefault(int(b), set()).add(int(a))
+    rows = []
+    for body in model.bodies:
+        if not body.deformable:
+            continue
+        sl = body.points
+        shape = grain_shape(state.x[sl], state.F[sl], model.vol0[sl], state.vol[sl])
+        others = partners.get(body.index, set())
+        walls = sum(1 for o in others if not model.bodies[o].deformable)
+        rows.append({"step": state.step, "time": state.time, "grain": body.name,
+                     "area": shape.area, "perimeter": shape.perimeter,
+                     "asphericity": shape.asphericity, "aspect_ratio": shape.aspect_ratio,
+                     "contacts_grains": len(others) - walls, "contacts_walls": walls})
+    return rows

@@ -21,6 +21,7 @@ from matplotlib.colors import Colormap, Normalize
 from matplotlib.figure import Figure
 
 from softgrains.errors import CaseError
+from softgrains.io import read_table
 from softgrains.io.vtk import read_points_vtu, read_pvd
 from softgrains.viz.series import read_run_series
 
@@ -294,6 +295,45 @@ def _coordination_figure(runs: Sequence[_Run]) -> Figure:
     return figure
 
 
+def _grain_shapes(run: _Run) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(φ, mean asphericity, its standard deviation over the grains) at each snapshot of
+    the compaction that has a grains/grains_<step>.csv (issue #13)."""
+    phi, mean, spread = [], [], []
+    steps = run.series["step"]
+    for path in sorted((run.folder / "grains").glob("grains_*.csv")):
+        table = read_table(path)
+        if table["step"].size == 0:
+            continue
+        at = np.flatnonzero(steps == table["step"][0])
+        if at.size == 0 or not run.compaction[at[0]]:
+            continue
+        phi.append(run.series["phi"][at[0]])
+        mean.append(float(np.mean(table["asphericity"])))
+        spread.append(float(np.std(table["asphericity"])))
+    return np.array(phi), np.array(mean), np.array(spread)
+
+
+def _asphericity_figure(runs: Sequence[_Run]) -> Figure | None:
+    """Mean grain asphericity P²/(4πA) against φ over the compaction, with its spread over
+    the grains; None when no run has grain shape tables."""
+    data = [(run, *_grain_shapes(run)) for run in runs]
+    if not any(phi.size for _, phi, _, _ in data):
+        return None
+    figure = Figure(figsize=(5.0, 3.8), layout="constrained")
+    ax = figure.add_subplot()
+    for run, phi, mean, spread in data:
+        if phi.size:
+            line, = ax.plot(phi, mean, marker="o", markersize=3, label=run.label)
+            ax.fill_between(phi, mean - spread, mean + spread, alpha=0.2,
+                            color=line.get_color(), linewidth=0)
+    ax.set_xlabel(r"packing fraction $\phi$ [–]")
+    ax.set_ylabel(r"mean asphericity $P^2/(4\pi A)$ [–]")
+    ax.set_title("shaded: ± one standard deviation over the grains", fontsize=8)
+    ax.grid(True, linewidth=0.5, alpha=0.3)
+    ax.legend(frameon=False)
+    return figure
+
+
 def _snapshots_figure(run: _Run) -> Figure:
     """Four snapshots spread over the compaction, on one von Mises colour scale."""
     start, end = run.compaction_times()
@@ -377,7 +417,7 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path) -> list
 
     Writes ``phi_sigma.png`` (against the top wall's σ_yy), ``phi_sigma_average.png`` (against
     the volume-averaged σ_yy, when series.csv has it) and ``coordination.png`` (all runs
-    overlaid); for each run with
+    overlaid), ``asphericity_phi.png`` when the runs wrote grain shapes; for each run with
     snapshots, ``snapshots.png`` and ``animation.gif`` (``snapshots_<slug>.png`` and
     ``animation_<slug>.gif`` when several runs are given); and ``side_by_side.png`` for the
     first two runs with snapshots. Every run is checked before anything is written (an
@@ -394,6 +434,9 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path) -> list
         _save(_phi_sigma_figure(runs, "stress_yy_avg"), out_dir / "phi_sigma_average.png",
               written)
     _save(_coordination_figure(runs), out_dir / "coordination.png", written)
+    shapes = _asphericity_figure(runs)
+    if shapes is not None:
+        _save(shapes, out_dir / "asphericity_phi.png", written)
 
     several = len(runs) > 1
     with_snapshots = [
