@@ -159,7 +159,9 @@ def _fits(curves: GroupCurves, pairs: list, stress: str) -> dict[str, object]:
     breaks = []
     for series, sigma0 in pairs:
         comp = series["phase"] == "compaction"
-        phi = series["phi"][comp] / series["phi"][np.flatnonzero(comp)[0] - 1]
+        if not comp.any():
+            continue
+        phi = series["phi"][comp] / series["phi"][max(np.flatnonzero(comp)[0] - 1, 0)]
         try:
             breaks.append(fit_two_regimes(series[STRESSES[stress]][comp] / sigma0,
                                           phi).break_ratio)
