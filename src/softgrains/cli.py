@@ -16,13 +16,16 @@ from collections.abc import Callable, Sequence
 from importlib import metadata
 from pathlib import Path
 
+from softgrains.batch import run_case
 from softgrains.case import load_case, summarize
-from softgrains.errors import CaseError, SimulationError
-
-EXIT_OK = 0
-EXIT_INVALID = 2
-EXIT_FAILED = 3
-EXIT_INTERRUPTED = 130
+from softgrains.errors import (
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_INVALID,
+    EXIT_OK,
+    CaseError,
+    SimulationError,
+)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -184,7 +187,7 @@ def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
     previous = signal.signal(signal.SIGTERM, _forward_to_workers) if forwarding else None
     try:
         with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-            futures = [pool.submit(_child_run, str(p), list(overrides), str(o), threads,
+            futures = [pool.submit(run_case, str(p), list(overrides), str(o), threads,
                                    resume)
                        for p, o in zip(paths, outs, strict=True)]
             statuses = []
@@ -208,29 +211,6 @@ def _forward_to_workers(signum: int, frame) -> None:
 
     for child in multiprocessing.active_children():
         os.kill(child.pid, signum)
-
-
-def _child_run(path: str, overrides: list[str], out: str, threads: int,
-               resume: bool = False) -> tuple[int, str]:
-    """One case in a worker process: (exit status, error message)."""
-    import numba
-
-    from softgrains.simulation import Simulation
-
-    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-    case = load_case(path, overrides=[*overrides, "output.progress=false"])
-    if case.simulation.threads == 0:
-        case.simulation.threads = threads
-    sim = Simulation(case, out=Path(out))
-    try:
-        summary = sim.run(resume=resume)
-    except SimulationError as error:
-        return EXIT_FAILED, str(error)
-    except CaseError as error:
-        return EXIT_INVALID, str(error)
-    if summary["status"] == "interrupted":
-        return 128 + (sim.stop_signal or 2), str(summary["message"])
-    return EXIT_OK, str(summary["message"])
 
 
 def _sweep(args: argparse.Namespace) -> int:

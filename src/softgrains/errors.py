@@ -8,6 +8,11 @@
 
 from __future__ import annotations
 
+EXIT_OK = 0
+EXIT_INVALID = 2  # CaseError
+EXIT_FAILED = 3  # SimulationError
+EXIT_INTERRUPTED = 130  # Ctrl-C (a run stopped by a signal exits 128 + the signal)
+
 
 class CaseError(ValueError):
     """An invalid case file, key or command-line argument (exit status 2)."""

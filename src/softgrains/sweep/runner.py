@@ -13,13 +13,14 @@ from __future__ import annotations
 import json
 import os
 import time
-from contextlib import redirect_stderr, redirect_stdout
 from dataclasses import dataclass
 from pathlib import Path
 
+from softgrains.batch import run_case
+from softgrains.errors import EXIT_FAILED, EXIT_INVALID, EXIT_OK
+from softgrains.io import CHECKPOINT_NAME
 from softgrains.sweep.spec import Member, Sweep
 
-EXIT_OK, EXIT_INVALID, EXIT_FAILED = 0, 2, 3
 QUIET_WORKERS = {"distributed.worker.profile.enabled": False,
                  "distributed.admin.system-monitor.gil.enabled": False}
 
@@ -46,30 +47,11 @@ def completed(folder: Path) -> bool:
 
 def run_member(base: str, overrides: dict, folder: str, threads: int) -> tuple[int, str, float]:
     """One member, in a worker: (exit status, message, wall seconds). Resumes from the
-    folder's checkpoint when there is one."""
-    import numba
-
-    from softgrains.case import load_case
-    from softgrains.errors import CaseError, SimulationError
-    from softgrains.io import CHECKPOINT_NAME
-    from softgrains.simulation import Simulation
-
+    folder's checkpoint when there is one; its log goes to its run.log only."""
     start = time.perf_counter()
-    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
-    out = Path(folder)
-    try:
-        case = load_case(base, {**overrides, "output.progress": False})
-        sim = Simulation(case, out=out)
-        # the member's log goes to its run.log only, not to the worker's console
-        with open(os.devnull, "w") as quiet, redirect_stdout(quiet), redirect_stderr(quiet):
-            summary = sim.run(resume=(out / CHECKPOINT_NAME).is_file())
-    except SimulationError as error:
-        return EXIT_FAILED, str(error), time.perf_counter() - start
-    except CaseError as error:
-        return EXIT_INVALID, str(error), time.perf_counter() - start
-    if summary["status"] == "interrupted":
-        return 128 + (sim.stop_signal or 2), str(summary["message"]), time.perf_counter() - start
-    return EXIT_OK, str(summary.get("message", "")), time.perf_counter() - start
+    resume = (Path(folder) / CHECKPOINT_NAME).is_file()
+    code, message = run_case(base, overrides, folder, threads, resume=resume, quiet=True)
+    return code, message, time.perf_counter() - start
 
 
 def run_sweep(sweep: Sweep, out: Path, workers: int = 0, scheduler: str | None = None,
