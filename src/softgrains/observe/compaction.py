@@ -83,6 +83,15 @@ def coordination(contacts, is_grain: np.ndarray) -> dict[str, float]:
     return coordination_and_rattlers(contacts, is_grain)[0]
 
 
+def bearing_pairs(contacts) -> set[tuple[int, int]]:
+    """The body pairs (α, β) with at least one contact of normal impulse P·n > 0."""
+    if contacts is None or len(contacts.nodes) == 0:
+        return set()
+    bearing = np.einsum("ij,ij->i", contacts.impulse, contacts.nodes.normal) > 0.0
+    return {(int(a), int(b)) for a, b in zip(contacts.nodes.alpha[bearing],
+                                             contacts.nodes.beta[bearing], strict=True)}
+
+
 def coordination_and_rattlers(contacts, is_grain: np.ndarray) -> tuple[dict, np.ndarray]:
     """:func:`coordination` and the rattler mask over bodies."""
     n_grains = int(is_grain.sum())
@@ -90,10 +99,7 @@ def coordination_and_rattlers(contacts, is_grain: np.ndarray) -> tuple[dict, np.
              "coordination_no_rattlers": 0.0, "rattler_fraction": 1.0 if n_grains else 0.0}
     if contacts is None or len(contacts.nodes) == 0 or n_grains == 0:
         return empty, is_grain.copy()
-    pn = np.einsum("ij,ij->i", contacts.impulse, contacts.nodes.normal)
-    bearing = pn > 0.0
-    pairs = {(int(a), int(b)) for a, b in zip(contacts.nodes.alpha[bearing],
-                                               contacts.nodes.beta[bearing], strict=True)}
+    pairs = bearing_pairs(contacts)
     gg = [(a, b) for a, b in pairs if is_grain[a] and is_grain[b]]
     gw = [(a, b) for a, b in pairs if is_grain[a] != is_grain[b]]
     count = np.zeros(is_grain.size, np.int64)

@@ -21,6 +21,7 @@ import numpy as np
 from contourpy import contour_generator
 from scipy.ndimage import gaussian_filter
 
+from softgrains.observe.compaction import bearing_pairs
 from softgrains.observe.coverage import _raster
 
 PIXELS_PER_SPACING = 8
@@ -90,13 +91,9 @@ def grain_rows(model, state, contacts) -> list[dict[str, object]]:
     if model.dim != 2:
         return []
     partners: dict[int, set[int]] = {}
-    if contacts is not None and len(contacts.nodes):
-        n = contacts.nodes.normal
-        pressing = np.einsum("ci,ci->c", contacts.impulse, n) > 0.0
-        for a, b in zip(contacts.nodes.alpha[pressing], contacts.nodes.beta[pressing],
-                        strict=True):
-            partners.setdefault(int(a), set()).add(int(b))
-            partners.setdefault(int(b), set()).add(int(a))
+    for a, b in bearing_pairs(contacts):
+        partners.setdefault(a, set()).add(b)
+        partners.setdefault(b, set()).add(a)
     rows = []
     for body in model.bodies:
         if not body.deformable:
