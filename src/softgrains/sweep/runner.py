@@ -58,7 +58,7 @@ def run_sweep(sweep: Sweep, out: Path, workers: int = 0, scheduler: str | None =
               threads: int = 1, echo=print) -> list[Outcome]:
     """Run the sweep's members into ``out``; returns their outcomes (also in sweep.json)."""
     import dask
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import Client, LocalCluster
 
     out.mkdir(parents=True, exist_ok=True)
     outcomes = {m.name: Outcome(m.name, "skipped (done before)", EXIT_OK)
@@ -79,7 +79,7 @@ def run_sweep(sweep: Sweep, out: Path, workers: int = 0, scheduler: str | None =
             client = Client(cluster)
         try:
             echo(f"Dask dashboard: {client.dashboard_link}")
-            _run_todo(client, sweep, todo, out, threads, outcomes, echo, as_completed)
+            _run_todo(client, sweep, todo, out, threads, outcomes, echo)
         finally:
             client.close()
             if cluster is not None:
@@ -104,8 +104,10 @@ def _ensemble(out: Path, echo) -> None:
 
 
 def _run_todo(client, sweep: Sweep, todo: list[Member], out: Path, threads: int,
-              outcomes: dict, echo, as_completed) -> None:
+              outcomes: dict, echo) -> None:
     """Submit the members, then report each as it ends with the counts and the time left."""
+    from dask.distributed import as_completed
+
     futures = {client.submit(run_member, str(sweep.base), m.overrides, str(out / m.name),
                              threads, key=f"member-{m.name}", pure=False): m for m in todo}
     started, walls, total = time.perf_counter(), [], len(todo)
@@ -121,9 +123,9 @@ def _run_todo(client, sweep: Sweep, todo: list[Member], out: Path, threads: int,
                       else "interrupted" if code > 128 else "failed")
             outcomes[member.name] = Outcome(member.name, status, code, message, wall)
             walls.append(wall)
-        finished = sum(1 for f in futures if f.done())
-        failed = sum(1 for m in todo if m.name in outcomes
-                     and outcomes[m.name].status not in ("done",))
+        ended = [outcomes[m.name] for m in todo if m.name in outcomes]
+        finished = len(ended)
+        failed = sum(1 for o in ended if o.status != "done")
         left = total - finished
         eta = (sum(walls) / len(walls)) * left / min(workers, max(left, 1)) if walls else 0.0
         echo(f"[{finished}/{total}] {member.name}: {outcomes[member.name].status}"
