@@ -43,15 +43,21 @@ class GroupCurves:
     high: dict[str, np.ndarray]
 
 
+def loading_rows(series: dict[str, np.ndarray]) -> np.ndarray:
+    """The compaction rows, preceded by the row before them (the pre-compacted state, whose
+    φ is φ0) when there is one; empty without a compaction."""
+    comp = np.flatnonzero(series["phase"] == "compaction")
+    return np.r_[comp[0] - 1, comp] if comp.size and comp[0] > 0 else comp
+
+
 def member_curve(series: dict[str, np.ndarray], sigma0: float, stress: str,
                  levels: np.ndarray) -> dict[str, np.ndarray]:
     """A member's observables at the first compaction row where stress/σ0 reaches each
     level (NaN beyond its largest stress); phi_ratio = φ/φ0 with φ0 the φ of the row before
     the compaction."""
-    comp = np.flatnonzero(series["phase"] == "compaction")
-    if comp.size == 0:
+    rows = loading_rows(series)
+    if rows.size == 0:
         return {name: np.full(levels.size, np.nan) for name in OBSERVABLES}
-    rows = np.r_[comp[0] - 1, comp] if comp[0] > 0 else comp
     s = series[stress][rows] / sigma0
     values = {"phi": series["phi"][rows], "coordination": series["coordination"][rows]}
     values["phi_ratio"] = values["phi"] / series["phi"][rows[0]]
@@ -158,12 +164,12 @@ def _fits(curves: GroupCurves, pairs: list, stress: str) -> dict[str, object]:
         fit["mean"] = str(error)
     breaks = []
     for series, sigma0 in pairs:
-        comp = series["phase"] == "compaction"
-        if not comp.any():
+        rows = loading_rows(series)
+        if rows.size == 0:
             continue
-        phi = series["phi"][comp] / series["phi"][max(np.flatnonzero(comp)[0] - 1, 0)]
+        phi = series["phi"][rows] / series["phi"][rows[0]]
         try:
-            breaks.append(fit_two_regimes(series[STRESSES[stress]][comp] / sigma0,
+            breaks.append(fit_two_regimes(series[STRESSES[stress]][rows] / sigma0,
                                           phi).break_ratio)
         except ValueError:
             pass
