@@ -201,6 +201,25 @@ class SqueezeResult:
     newton_iterations: int
     n_dofs: int
     wall_time: float
+    basis: Basis | None = None    # the final state: the P2 basis and displacement (quarter)
+    displacement: np.ndarray | None = None
+
+    def cauchy_von_mises(self, nu: float, young: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """(reference positions (2, q), von Mises of the Cauchy stress (q,)) at the
+        quadrature points of the final state, neo-Hookean plane strain:
+        σ = [μ (b − I) + λ ln J I] / J in the plane, σ_zz = λ ln J / J."""
+        lam, mu = lame(young, nu)
+        g = self.basis.interpolate(self.displacement).grad  # (2, 2, elements, points)
+        F = EYE + g
+        J = F[0, 0] * F[1, 1] - F[0, 1] * F[1, 0]
+        b = np.einsum("ik...,jk...->ij...", F, F)
+        sigma = (mu * (b - EYE) + lam * np.log(J) * EYE) / J
+        szz = lam * np.log(J) / J
+        sxx, syy, sxy = sigma[0, 0], sigma[1, 1], sigma[0, 1]
+        vm = np.sqrt(0.5 * ((sxx - syy) ** 2 + (syy - szz) ** 2 + (szz - sxx) ** 2)
+                     + 3.0 * sxy**2)
+        X = self.basis.global_coordinates().value  # (2, elements, points)
+        return X.reshape(2, -1), vm.ravel()
 
 
 def squeeze(nu: float, *, young: float = 1.0, radius: float = 1.0, n_refine: int = 4,
@@ -308,6 +327,8 @@ def squeeze(nu: float, *, young: float = 1.0, radius: float = 1.0, n_refine: int
         newton_iterations=total_its,
         n_dofs=n,
         wall_time=time.perf_counter() - t0,
+        basis=basis,
+        displacement=u,
     )
 
 

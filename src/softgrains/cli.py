@@ -98,6 +98,14 @@ def _parser() -> argparse.ArgumentParser:
     plot.add_argument("--out", type=Path, metavar="FIGDIR",
                       help="where the comparison figures go (default: DIR/figures for one "
                       "run, the first run's parent/figures for several)")
+    plot.add_argument("--field", default="von_mises", metavar="NAME",
+                      help="the field shading the grains in the snapshots and animations: "
+                      "von_mises (default), pressure, J or any scalar point field of the "
+                      "snapshots")
+    plot.add_argument("--raw", action="store_true",
+                      help="shade the raw point values instead of the field smoothed per "
+                      "grain (least-squares fit on a grid of the point spacing, each "
+                      "grain's mean kept)")
     plot.set_defaults(command=_plot)
 
     sweep = commands.add_parser(
@@ -267,7 +275,9 @@ def _plot(args: argparse.Namespace) -> int:
     out = args.out
     if out is None and len(args.directories) > 1:
         out = args.directories[0].parent / "figures"
-    for path in draw_figures(args.directories, out):
+    from softgrains.viz.compaction import FieldChoice
+
+    for path in draw_figures(args.directories, out, FieldChoice(args.field, not args.raw)):
         print(path)
     return EXIT_OK
 

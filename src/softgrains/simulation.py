@@ -40,11 +40,12 @@ from softgrains.io import (
 )
 from softgrains.model import build
 from softgrains.observe.bodies import body_columns, body_records
+from softgrains.observe.chains import chain_lines
 from softgrains.observe.compaction import COMPACTION_COLUMNS
 from softgrains.observe.contacts import CONTACT_COLUMNS, contact_records, contact_rows
 from softgrains.observe.energies import kinetic_energy, strain_energy
 from softgrains.observe.shapes import GRAIN_COLUMNS, grain_rows
-from softgrains.observe.stress import von_mises
+from softgrains.observe.stress import project_per_grain, von_mises
 from softgrains.protocol import UniaxialCompaction
 from softgrains.solver import Solver, StepDiagnostics
 
@@ -158,9 +159,14 @@ class Simulation:
     def snapshot_data(self) -> dict[str, np.ndarray]:
         m, s = self.model, self.state
         kinematic = np.array([not b.deformable for b in m.bodies], np.int32)[m.body_id]
+        # the stress smoothed per grain on a grid of the point spacing δ = h / n_pc (the
+        # least error against a FE solution: benchmarks/stress_scatter.py)
+        smoothed = project_per_grain(s.x, s.vol, s.sigma, m.body_id,
+                                     m.lattice.h / m.points_per_cell)
         return {"body": m.body_id.astype(np.int32), "kinematic": kinematic,
                 "velocity": s.v, "stress": s.sigma, "von_mises": von_mises(s.sigma),
-                "J": np.linalg.det(s.F), "mass": m.mass, "volume": s.vol}
+                "stress_smoothed": smoothed, "von_mises_smoothed": von_mises(smoothed),
+                "J": np.linalg.det(s.F), "F": s.F, "mass": m.mass, "volume": s.vol}
 
     # -- stepping ----------------------------------------------------------------------
     def step(self) -> StepDiagnostics:
@@ -299,6 +305,7 @@ class Simulation:
                 (out / "snapshots").mkdir(exist_ok=True)
                 pvd = _pvd(out / "snapshots" / "points.pvd", resume)
                 contacts_pvd = _pvd(out / "snapshots" / "contacts.pvd", resume)
+                chains_pvd = _pvd(out / "snapshots" / "chains.pvd", resume)
         progress = Progress(self.n_steps, enabled=cfg.progress)
         if out is not None:
             log = open_run_log(out, verbose_console=not progress.active)
@@ -335,6 +342,12 @@ class Simulation:
             write_points_vtu(out / "snapshots" / name, records["position"],
                              {k: v for k, v in records.items() if k != "position"})
             contacts_pvd.add(self.state.time, name)
+            # the force chains as lines (issue #13): one per pair of bodies pressing
+            chains = chain_lines(self.model, self.state, records)
+            name = f"chains_{step:08d}.vtu"
+            write_points_vtu(out / "snapshots" / name, chains.points, {}, chains.lines,
+                             chains.data)
+            chains_pvd.add(self.state.time, name)
             table = CsvTable(out / "contacts" / f"contacts_{step:08d}.csv", CONTACT_COLUMNS)
             for row in contact_rows(self.model, self.state, records):
                 table.append(row)

@@ -129,3 +129,58 @@ def test_the_sweep_command_prints_the_table_and_exits_non_zero_on_a_failed_membe
     assert re.search(r"^velocity-1000\.0,0\.0 +failed", captured.out, re.M)
     assert "1 of 2 members did not complete" in captured.err
     assert main(["sweep", str(tmp_path / "missing.toml")]) == 2
+
+
+def test_a_killed_workers_member_is_rescheduled_and_resumes_from_its_checkpoint(tmp_path):
+    """Issue #12, item 3: the worker running a member is killed (SIGKILL, as by the
+    kernel's OOM killer or a lost node); Dask reschedules the member on a worker its nanny
+    restarts, the member resumes from its last checkpoint, and the sweep ends with every
+    member done."""
+    import os
+    import threading
+    import time
+
+    from dask.distributed import Client, LocalCluster
+
+    from softgrains.sweep.runner import QUIET_WORKERS
+
+    path = _write(tmp_path, 'base = "base.toml"\n[parameters]\n'
+                  '"bodies.0.velocity" = [[0.1, 0.0], [0.2, 0.0]]\n'
+                  '[set]\n"simulation.end_time" = 0.6\n"output.snapshot_interval" = 0\n'
+                  '"output.interval" = 1\n"output.checkpoint_interval" = 20\n')
+    sweep = load_sweep(path)
+    out = tmp_path / "out"
+    import dask
+
+    with dask.config.set(QUIET_WORKERS):
+        cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                               dashboard_address=":0")
+    client = Client(cluster)
+    try:
+        result = {}
+        thread = threading.Thread(target=lambda: result.update(outcomes=run_sweep(
+            sweep, out, scheduler=cluster.scheduler_address, echo=lambda line: None)))
+        thread.start()
+        victim = sweep.members[0].name
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:  # until the member has passed a checkpoint
+            series = out / victim / "series.csv"
+            if (out / victim / "checkpoint.h5").is_file() and series.is_file() \
+                    and len(series.read_text().splitlines()) > 60:
+                break
+            time.sleep(0.05)
+        else:
+            pytest.fail("the member never reached its first checkpoint")
+        worker = next(address for address, keys in client.processing().items()
+                      if f"member-{victim}" in keys)
+        pid = client.run(os.getpid, workers=[worker])[worker]
+        os.kill(pid, signal.SIGKILL)
+        thread.join(timeout=300)
+        assert not thread.is_alive()
+    finally:
+        client.close()
+        cluster.close()
+    assert [o.status for o in result["outcomes"]] == ["done", "done"]
+    assert "resumed" in (out / victim / "run.log").read_text().lower()
+    steps = read_table(out / victim / "series.csv")["step"]
+    assert np.array_equal(steps, np.arange(steps[0], 601))  # no step twice, none lost

@@ -8,13 +8,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from matplotlib.collections import PolyCollection
+from matplotlib.animation import FFMpegWriter
 from matplotlib.image import imread
 from PIL import Image
 
 from softgrains.errors import CaseError
 from softgrains.io.vtk import PvdSeries, write_points_vtu
 from softgrains.viz.compaction import (
+    FieldChoice,
     _load_run,
     _phi_sigma_figure,
     _side_by_side_figure,
@@ -30,7 +31,8 @@ H0, WIDTH, END_TIME = 1.0, 1.0, 1.0
 
 
 def _points(gap: float, stiffness: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Two disks of grid points squashed to ``gap``, between a bottom and a top wall row."""
+    """Two disks of grid points squashed to ``gap``, between a bottom and a top wall row;
+    their stress is uniaxial (σ_xx = its von Mises stress)."""
     spacing = 0.1
     grid = np.stack(np.meshgrid(np.arange(-2, 3), np.arange(-2, 3)), axis=-1).reshape(-1, 2)
     disk = spacing * grid[np.hypot(grid[:, 0], grid[:, 1]) <= 2.2]
@@ -45,13 +47,27 @@ def _points(gap: float, stiffness: float) -> tuple[np.ndarray, dict[str, np.ndar
     n_grains, n = len(grains), len(positions)
     kinematic = np.r_[np.zeros(n_grains, int), np.ones(n - n_grains, int)]
     von_mises = np.r_[stiffness * (1.0 - squash) * (1.0 + grains[:, 1]), np.zeros(n - n_grains)]
+    stress = np.zeros((n, 3, 3))
+    stress[:, 0, 0] = von_mises
     point_data = {
         "body": np.r_[np.repeat([0, 1], n_grains // 2), np.full(n - n_grains, 2)],
         "kinematic": kinematic,
         "volume": np.full(n, spacing**2 * squash),
+        "stress": stress,
         "von_mises": von_mises,
+        "J": np.r_[np.full(n_grains, squash), np.ones(n - n_grains)],
     }
     return positions, point_data
+
+
+def _contacts(gap: float, stiffness: float) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Contact records of ``_points``' frame: three nodes between the grains (bodies 0 and
+    1), two with each wall row (body 2), forces growing with the squash."""
+    load = stiffness * (1.0 - gap / H0) + 1.0
+    positions = np.array([[0.5, 0.45], [0.5, 0.5], [0.5, 0.55], [0.3, 0.0], [0.7, gap]])
+    return positions, {"alpha": np.array([0, 0, 0, 0, 1]), "beta": np.array([1, 1, 1, 2, 2]),
+                       "fn": load * np.array([1.0, 2.0, 1.0, 1.5, 0.5]),
+                       "status": np.array([1, 2, 1, 1, 2])}
 
 
 def _make_run(
@@ -86,14 +102,31 @@ def _make_run(
     (folder / "summary.json").write_text(json.dumps(summary))
     if snapshots:
         pvd = PvdSeries(folder / "snapshots" / "points.pvd")
+        contacts = PvdSeries(folder / "snapshots" / "contacts.pvd")
         for index, time in enumerate(np.linspace(start, END_TIME, snapshots)):
             s = (time - start) / (END_TIME - start)
+            gap = H0 - s * (H0 - final_gap)
             name = f"points_{index:08d}.vtu"
-            write_points_vtu(
-                folder / "snapshots" / name, *_points(H0 - s * (H0 - final_gap), stiffness)
-            )
+            write_points_vtu(folder / "snapshots" / name, *_points(gap, stiffness))
             pvd.add(time, name)
+            name = f"contacts_{index:08d}.vtu"
+            write_points_vtu(folder / "snapshots" / name, *_contacts(gap, stiffness))
+            contacts.add(time, name)
     return folder
+
+
+@pytest.fixture(autouse=True)
+def _gif_animations(monkeypatch):
+    """The tests below expect GIF animations: what a machine without ffmpeg writes."""
+    monkeypatch.setattr(FFMpegWriter, "isAvailable", classmethod(lambda cls: False))
+
+
+@pytest.mark.skipif(not FFMpegWriter.isAvailable(), reason="ffmpeg is not installed")
+def test_with_ffmpeg_the_animation_is_an_mp4(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.undo()
+    run = _make_run(tmp_path / "run_a", None, snapshots=3)
+    paths = plot_compaction([run], tmp_path / "out")
+    assert paths[-1].name == "animation.mp4" and 1000 < paths[-1].stat().st_size < 10e6
 
 
 def _assert_png(path: Path) -> None:
@@ -114,6 +147,7 @@ def test_two_runs_write_every_figure(tmp_path: Path) -> None:
         "snapshots_soft-0-3.png",
         "snapshots_stiff.png",
         "side_by_side.png",
+        "force_chains.png",
         "animation_soft-0-3.gif",
         "animation_stiff.gif",
     ]
@@ -121,6 +155,7 @@ def test_two_runs_write_every_figure(tmp_path: Path) -> None:
         assert path.parent == out and path.is_file()
         if path.suffix == ".png":
             _assert_png(path)
+    assert all(path.stat().st_size < 10e6 for path in paths)  # issue #13: animations < 10 MB
     with Image.open(out / "animation_soft-0-3.gif") as gif:
         assert gif.format == "GIF"
         assert gif.n_frames == 7
@@ -208,15 +243,10 @@ def test_phi_sigma_draws_the_covered_area_dotted(tmp_path: Path) -> None:
 def test_side_by_side_shares_one_colour_scale(tmp_path: Path) -> None:
     soft = _load_run(_make_run(tmp_path / "soft", "Soft", stiffness=1e4))
     stiff = _load_run(_make_run(tmp_path / "stiff", "Stiff", final_gap=0.8, stiffness=5e4))
-    figure = _side_by_side_figure(soft, stiff)
+    figure = _side_by_side_figure(soft, stiff, FieldChoice())
     panels = [ax for ax in figure.axes if ax.get_title()]
     assert len(panels) == 2
-    grains = [
-        next(
-            c for c in ax.collections if isinstance(c, PolyCollection) and c.get_array() is not None
-        )
-        for ax in panels
-    ]
+    grains = [next(c for c in ax.collections if c.get_array() is not None) for ax in panels]
     assert grains[0].norm is grains[1].norm
     assert grains[0].get_clim() == grains[1].get_clim()
     assert grains[0].get_clim()[1] > 0
@@ -280,3 +310,17 @@ def test_a_run_with_unconverged_steps_says_so_in_its_label(tmp_path: Path) -> No
     clean = _make_run(tmp_path / "b", "B", snapshots=0)
     _add_column(clean, "contact_converged", 1.0, "phi")  # φ > 0: converged rows
     assert _load_run(clean).label == "B"
+
+
+def test_stressed_runs_get_the_force_distribution_and_any_field(tmp_path: Path) -> None:
+    """Runs that pass 10 σ0 get P(f/⟨f⟩) (issue #13, item 3); the grains can be shaded
+    by any scalar point field, smoothed or raw, and an unknown field is a case error."""
+    soft = _make_run(tmp_path / "soft", "Soft", stiffness=1e6, snapshots=4)
+    stiff = _make_run(tmp_path / "stiff", "Stiff", stiffness=2e6, snapshots=4)
+    names = [p.name for p in plot_compaction([soft, stiff], tmp_path / "out")]
+    assert "force_distribution.png" in names and "force_chains.png" in names
+    run = _load_run(soft)
+    raw = _side_by_side_figure(run, run, FieldChoice("J", smoothed=False))
+    assert "J = det F" in raw.axes[-1].get_ylabel() and "at the points" in raw.axes[-1].get_ylabel()
+    with pytest.raises(CaseError, match="no scalar point field 'nope'.*von_mises"):
+        _side_by_side_figure(run, run, FieldChoice("nope"))

@@ -4,7 +4,8 @@ We write the format ourselves rather than depend on ``vtk`` or ``meshio``: a poi
 vertex cells with binary inline arrays is about a page of code, while those packages are
 large binary or extra dependencies for a single file type.
 
-Each ``.vtu`` holds one ``VTK_VERTEX`` cell per point so that ParaView draws the points; point
+Each ``.vtu`` holds one ``VTK_VERTEX`` cell per point so that ParaView draws the points (or
+``VTK_LINE`` cells between given pairs of points, with cell arrays: the force chains); point
 arrays are scalars (one component), vectors (padded to 3 components) or tensors (padded to
 3x3, written as 9 components). Arrays are base64-encoded little-endian binary, each preceded by
 its byte count as a UInt64 header encoded separately.
@@ -22,6 +23,7 @@ import numpy as np
 from softgrains.io.summary import write_bytes_atomic
 
 _VTK_VERTEX = 1
+_VTK_LINE = 3
 _HEADER = np.dtype("<u8")
 _HEADER_CHARS = 4 * -(-_HEADER.itemsize // 3)  # base64 length of the encoded header
 _VTK_TYPES = {
@@ -47,7 +49,7 @@ def _pad(array: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
 
 
 def _components(name: str, values: np.ndarray, n: int) -> np.ndarray:
-    """A point array as ``(n, components)``: scalar -> 1, vector -> 3, tensor -> 9."""
+    """A point or cell array as ``(n, components)``: scalar -> 1, vector -> 3, tensor -> 9."""
     if values.shape[:1] != (n,):
         raise ValueError(f"point array {name!r} has shape {values.shape}, expected ({n}, ...)")
     if values.ndim == 1:
@@ -81,17 +83,29 @@ def _data_array(parent: ET.Element, values: np.ndarray, name: str | None = None)
 
 
 def write_points_vtu(
-    path: str | Path, positions: np.ndarray, point_data: Mapping[str, np.ndarray]
+    path: str | Path, positions: np.ndarray, point_data: Mapping[str, np.ndarray],
+    lines: np.ndarray | None = None, line_data: Mapping[str, np.ndarray] | None = None
 ) -> None:
     """Write material points at ``positions`` ``(n, d)`` with their ``point_data`` to ``path``.
 
     Each array is ``(n,)`` scalar, ``(n, d)`` vector or ``(n, d, d)`` tensor, float or int.
-    The file is replaced atomically.
+    The cells are one vertex per point, or, when ``lines`` ``(k, 2)`` (point indices) is
+    given, one line per row with its ``line_data`` (cell arrays, ``(k, ...)``): e.g. the
+    force chains. The file is replaced atomically.
     """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim != 2 or positions.shape[1] not in (2, 3):
         raise ValueError(f"positions have shape {positions.shape}, expected (n, d), d = 2 or 3")
     n = positions.shape[0]
+    if lines is None:
+        connectivity = np.arange(n, dtype=np.int64)
+        offsets = np.arange(1, n + 1, dtype=np.int64)
+        types = np.full(n, _VTK_VERTEX, dtype=np.uint8)
+    else:
+        lines = np.asarray(lines, dtype=np.int64).reshape(-1, 2)
+        connectivity = lines.ravel()
+        offsets = 2 * np.arange(1, len(lines) + 1, dtype=np.int64)
+        types = np.full(len(lines), _VTK_LINE, dtype=np.uint8)
 
     root = ET.Element(
         "VTKFile",
@@ -101,16 +115,20 @@ def write_points_vtu(
         header_type="UInt64",
     )
     grid = ET.SubElement(root, "UnstructuredGrid")
-    piece = ET.SubElement(grid, "Piece", NumberOfPoints=str(n), NumberOfCells=str(n))
+    piece = ET.SubElement(grid, "Piece", NumberOfPoints=str(n), NumberOfCells=str(len(types)))
     data = ET.SubElement(piece, "PointData")
     for name, values in point_data.items():
         _data_array(data, _components(name, np.asarray(values), n), name)
+    if line_data:
+        cell_data = ET.SubElement(piece, "CellData")
+        for name, values in line_data.items():
+            _data_array(cell_data, _components(name, np.asarray(values), len(types)), name)
     points = ET.SubElement(piece, "Points")
     _data_array(points, _pad(positions, (n, 3)))
     cells = ET.SubElement(piece, "Cells")
-    _data_array(cells, np.arange(n, dtype=np.int64), "connectivity")
-    _data_array(cells, np.arange(1, n + 1, dtype=np.int64), "offsets")
-    _data_array(cells, np.full(n, _VTK_VERTEX, dtype=np.uint8), "types")
+    _data_array(cells, connectivity, "connectivity")
+    _data_array(cells, offsets, "offsets")
+    _data_array(cells, types, "types")
 
     ET.indent(root)
     write_bytes_atomic(path, ET.tostring(root, encoding="utf-8", xml_declaration=True))

@@ -3,8 +3,9 @@
 Each grain is drawn as the union of its points' deformed cells F_p·[−s_p/2, s_p/2]² on a
 pixel raster of δ/8 (observe/coverage.py), blurred by a Gaussian of σ = δ so that the
 lattice's staircase does not count as boundary (σ = δ/4 left the perimeter of a disk 12%
-long), and its outline is the longest closed level-½ line of that image (marching squares,
-contourpy: a matplotlib dependency). The blur also rounds corners: a regular hexagon's
+long), and its outline is the longest closed line of that image at half the grain's median
+level (½ where the cells tile; ring cells leave holes) (marching squares, contourpy: a
+matplotlib dependency). The blur also rounds corners: a regular hexagon's
 asphericity comes out 3% low (tests/observe/test_grain_shapes.py). Per grain:
     area A = Σ_p V_p (its points' volumes),
     perimeter P = length of the outline,
@@ -39,15 +40,19 @@ class GrainShape:
     aspect_ratio: float
 
 
-def grain_shape(x: np.ndarray, F: np.ndarray, vol0: np.ndarray, vol: np.ndarray
-                ) -> GrainShape:
-    """The shape descriptors of one grain from its points (positions, F, V0, V)."""
+def grain_outline(x: np.ndarray, F: np.ndarray, side: np.ndarray,
+                  pixels_per_spacing: int = PIXELS_PER_SPACING) -> np.ndarray:
+    """The outline (m, 2) of one grain: the longest closed line at half the grain's median
+    coverage (½ where the cells tile) of its points' deformed cells F_p·[−s_p/2, s_p/2]²
+    (s_p = ``side``) rastered at δ/8 (δ/``pixels_per_spacing``) and blurred over σ = δ
+    (δ the median side)."""
     if x.shape[1] != 2:
-        raise NotImplementedError("grain shapes are written for 2D")
-    side = np.sqrt(np.asarray(vol0, float))
-    pixel = float(np.median(side)) / PIXELS_PER_SPACING
+        raise NotImplementedError("grain outlines are written for 2D")
+    side = np.asarray(side, float)
+    spacing = float(np.median(side))
+    pixel = spacing / pixels_per_spacing
     reach = float(np.max(np.abs(F).sum(axis=2).max(axis=1) * side))  # a cell's extent
-    pad = reach + 4.0 * BLUR_SPACINGS * float(np.median(side))
+    pad = reach + 4.0 * BLUR_SPACINGS * spacing
     lower = x.min(axis=0) - pad
     nx, ny = (int(np.ceil(s / pixel)) + 1 for s in (x.max(axis=0) + pad - lower))
     covered = np.zeros(nx * ny, np.int32)
@@ -55,13 +60,23 @@ def grain_shape(x: np.ndarray, F: np.ndarray, vol0: np.ndarray, vol: np.ndarray
     _raster(np.ascontiguousarray(x, float), np.ascontiguousarray(F, float), side,
             np.zeros(len(x), np.int64), lower, pixel, pixel, nx, ny, covered, last)
     image = gaussian_filter(covered.reshape(nx, ny).astype(float),
-                            BLUR_SPACINGS * PIXELS_PER_SPACING)
+                            BLUR_SPACINGS * pixels_per_spacing)
     centres = lower[:, None] + pixel * (np.arange(max(nx, ny)) + 0.5)[None, :]
-    lines = contour_generator(centres[0, :nx], centres[1, :ny], image.T).lines(0.5)
+    # half of the grain's own coverage: 0.5 for lattice cells that tile; ring cells, taken
+    # as squares, leave holes (about 8% of a disk) that would pull a level-½ line inwards
+    at = np.clip(((x - lower) / pixel).astype(np.int64), 0, [nx - 1, ny - 1])
+    level = 0.5 * float(np.median(image[at[:, 0], at[:, 1]]))
+    lines = contour_generator(centres[0, :nx], centres[1, :ny], image.T).lines(level)
     closed = [line for line in lines if len(line) > 3]
-    outline = max(closed, key=_length)
+    return max(closed, key=_length)
+
+
+def grain_shape(x: np.ndarray, F: np.ndarray, vol0: np.ndarray, vol: np.ndarray
+                ) -> GrainShape:
+    """The shape descriptors of one grain from its points (positions, F, V0, V)."""
+    outline = grain_outline(x, F, np.sqrt(np.asarray(vol0, float)))
     area = float(np.sum(vol))
-    enclosed = abs(_shoelace(outline))
+    enclosed = abs(polygon_area(outline))
     perimeter = _length(outline)
     mean = np.average(x, axis=0, weights=vol)
     r = x - mean
@@ -76,7 +91,8 @@ def _length(line: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.diff(closed, axis=0), axis=1)))
 
 
-def _shoelace(line: np.ndarray) -> float:
+def polygon_area(line: np.ndarray) -> float:
+    """Signed area of a closed polygon (shoelace formula; > 0 counter-clockwise)."""
     x, y = line[:, 0], line[:, 1]
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
 

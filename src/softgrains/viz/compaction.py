@@ -9,20 +9,24 @@ from __future__ import annotations
 
 import json
 import re
+import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from matplotlib.animation import FuncAnimation, PillowWriter
+from matplotlib.animation import FFMpegWriter, FuncAnimation, PillowWriter
 from matplotlib.axes import Axes
-from matplotlib.collections import PolyCollection
 from matplotlib.colors import Colormap, Normalize
 from matplotlib.figure import Figure
 
 from softgrains.errors import CaseError
 from softgrains.io import read_table
 from softgrains.io.vtk import read_points_vtu, read_pvd
+from softgrains.observe.chains import PairForces, body_centres, pair_forces
+from softgrains.observe.stress import project_per_grain, von_mises
+from softgrains.viz.chains import ChainPanel, chains_figure, distribution_figure
+from softgrains.viz.grains import GrainPoints, draw_grains, draw_walls, grain_mesh
 from softgrains.viz.series import read_run_series
 
 _REQUIRED_COLUMNS = ("time", "phase", "phi", "stress_yy", "coordination", "wall_gap")
@@ -31,10 +35,11 @@ _COMPACTION = "compaction"
 _DPI = 150
 _CMAP = "viridis"
 _WALL_COLOR = "0.6"
-_STRESS_LABEL = "von Mises stress [Pa]"
 _SNAPSHOT_FRACTIONS = (0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0)
 _GIF_SIZE, _GIF_DPI, _GIF_FPS, _GIF_MAX_FRAMES = (4.0, 4.0), 80, 8, 60
+_MP4_DPI, _MP4_KBPS = 150, 1500  # 60 frames at 8 fps: ~1.4 MB
 _CLIP_PERCENTILE = 99.0
+SMOOTHING_SPACINGS = 1.0  # smoothing grid in point spacings δ (benchmarks/stress_scatter.py)
 _PHI_LABEL = r"$\phi/\phi_0$ [–]"
 _SIGMA_LABEL = r"$\sigma_{yy}/\sigma_0$ [–]"
 _SIGMA_AVG_LABEL = r"$\langle\sigma_{yy}\rangle/\sigma_0$ (sample average) [–]"
@@ -52,6 +57,7 @@ class _Run:
     series: dict[str, np.ndarray]
     compaction: np.ndarray  # boolean mask of the compaction rows of ``series``
     snapshots: list[tuple[float, Path]]
+    friction: float  # contact.friction of the run's case.toml (0 when not found)
 
     def at(self, column: str, time: float) -> float:
         """``column`` linearly interpolated at ``time``."""
@@ -67,15 +73,51 @@ class _Run:
         return float(times[0]), float(times[-1])
 
 
+_FIELD_NAMES = {"von_mises": "von Mises stress [Pa]", "pressure": "pressure [Pa]",
+                "J": "J = det F [–]"}
+
+
+@dataclass(frozen=True)
+class FieldChoice:
+    """What the grains are shaded with: ``name`` is ``von_mises`` (of the stress tensor),
+    ``pressure`` (−tr σ / 3), ``J`` or any scalar point field of the snapshots; ``smoothed``
+    draws its least-squares projection per grain (observe/stress.project_per_grain, each
+    grain's mean kept) instead of the raw point values."""
+
+    name: str = "von_mises"
+    smoothed: bool = True
+
+    def label(self) -> str:
+        """The colour bar's label."""
+        how = "smoothed per grain" if self.smoothed else "at the points"
+        return f"{_FIELD_NAMES.get(self.name, self.name)}, {how}"
+
+    def caption(self) -> str:
+        """One sentence on what the shading shows."""
+        name = _FIELD_NAMES.get(self.name, self.name).split(" [")[0]
+        if self.smoothed:
+            return (f"{name}: least-squares fit per grain on a grid of the point spacing "
+                    "(each grain's mean kept)")
+        return f"{name} at the material points, interpolated linearly between them"
+
+
+DEFAULT_FIELD = FieldChoice()
+
+
 @dataclass(frozen=True)
 class _Frame:
-    """One snapshot: point centres, square sides, von Mises stress and the wall mask."""
+    """One snapshot: its points grouped into grains, the shaded field at the points, and the
+    squares' centres and sides (for the axes' extent)."""
 
     time: float
+    points: GrainPoints
+    field: np.ndarray
     positions: np.ndarray
     side: np.ndarray
-    von_mises: np.ndarray
-    wall: np.ndarray
+
+    @property
+    def grain(self) -> np.ndarray:
+        return ~np.isin(self.points.body, list(self.points.wall_bodies))
 
 
 def _read_protocol(folder: Path) -> dict[str, object]:
@@ -141,25 +183,57 @@ def _load_run(folder: str | Path) -> _Run:
         series=series,
         compaction=compaction,
         snapshots=_snapshot_files(folder),
+        friction=_friction(folder),
     )
 
 
-def _read_frame(time: float, path: Path) -> _Frame:
-    """Read one snapshot file."""
+def _friction(folder: Path) -> float:
+    """contact.friction of ``folder/case.toml`` (0 when it cannot be read)."""
+    try:
+        case = tomllib.loads((folder / "case.toml").read_text(encoding="utf-8"))
+        return float(case.get("contact", {}).get("friction", 0.0))
+    except (OSError, ValueError, TypeError, AttributeError):
+        return 0.0
+
+
+def _read_frame(time: float, path: Path, field: FieldChoice = DEFAULT_FIELD) -> _Frame:
+    """Read one snapshot file and compute the field the grains are shaded with."""
     if not path.is_file():
         raise CaseError(f"{path}: snapshot listed in points.pvd is missing")
-    positions, data = read_points_vtu(path, dim=2)
-    missing = [name for name in ("volume", "von_mises") if name not in data]
+    positions, data = read_points_vtu(path)
+    positions = positions[:, :2]
+    missing = [name for name in ("volume", "body", "stress", "J") if name not in data]
     if missing:
         raise CaseError(f"{path}: snapshot lacks point data {', '.join(missing)}")
-    kinematic = data.get("kinematic", np.zeros(len(positions)))
-    return _Frame(
-        time=time,
-        positions=positions,
-        side=np.sqrt(np.clip(data["volume"], 0.0, None)),
-        von_mises=data["von_mises"],
-        wall=kinematic.astype(int) == 1,
-    )
+    J = np.clip(data["J"], 1e-12, None)
+    volume = np.clip(data["volume"], 0.0, None)
+    if "F" in data:
+        F = data["F"][:, :2, :2]
+    else:  # snapshots written before the deformation gradient was: isotropic cells
+        F = np.sqrt(J)[:, None, None] * np.eye(2)[None, :, :]
+    body = data["body"].astype(np.int64)
+    kinematic = data.get("kinematic", np.zeros(len(positions))).astype(int) == 1
+    points = GrainPoints(positions, F, np.sqrt(volume / J), body,
+                         frozenset(np.unique(body[kinematic]).tolist()))
+    if field.name in ("von_mises", "pressure"):
+        values = data["stress"]  # (n, 3, 3): σ_zz is the plane-strain stress
+    elif field.name in data and data[field.name].ndim == 1:
+        values = data[field.name]
+    else:
+        scalars = sorted(k for k, v in data.items() if v.ndim == 1)
+        raise CaseError(f"{path}: no scalar point field {field.name!r}; choose von_mises, "
+                        f"pressure or one of {', '.join(scalars)}")
+    if field.smoothed and field.name in ("von_mises", "pressure") and "stress_smoothed" in data:
+        values = data["stress_smoothed"]  # projected by the run (grid of the point spacing)
+    elif field.smoothed:
+        values = project_per_grain(positions, volume, values, body,
+                                   SMOOTHING_SPACINGS * float(np.median(points.side)))
+    if field.name == "von_mises":
+        values = von_mises(values)
+    elif field.name == "pressure":
+        values = -np.trace(values, axis1=1, axis2=2) / 3.0
+    return _Frame(time=time, points=points, field=values, positions=positions,
+                  side=np.sqrt(volume))
 
 
 def _nearest_snapshot(run: _Run, time: float) -> tuple[float, Path]:
@@ -181,46 +255,23 @@ def _slugs(runs: Sequence[_Run]) -> list[str]:
     return slugs
 
 
-def _stress_norm(frames: Sequence[_Frame]) -> Normalize:
-    """A colour scale from 0 to the 99th percentile of the grains' von Mises stress."""
-    values = np.concatenate([frame.von_mises[~frame.wall] for frame in frames])
-    top = float(np.percentile(values, _CLIP_PERCENTILE)) if values.size else 0.0
-    return Normalize(vmin=0.0, vmax=top if top > 0.0 else 1.0)
+def _field_norm(frames: Sequence[_Frame]) -> Normalize:
+    """One colour scale for the grains of every frame: from 0 (or the 1st percentile when
+    the field goes negative) to the 99th percentile."""
+    values = np.concatenate([frame.field[frame.grain] for frame in frames])
+    if not values.size:
+        return Normalize(vmin=0.0, vmax=1.0)
+    top = float(np.percentile(values, _CLIP_PERCENTILE))
+    low = min(0.0, float(np.percentile(values, 100.0 - _CLIP_PERCENTILE)))
+    return Normalize(vmin=low, vmax=top if top > low else low + 1.0)
 
 
-def _squares(positions: np.ndarray, side: np.ndarray) -> np.ndarray:
-    """Corners ``(n, 4, 2)`` of squares of ``side`` centred on ``positions``."""
-    corners = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
-    return positions[:, None, :] + side[:, None, None] * corners[None, :, :]
-
-
-def _draw_points(
-    ax: Axes, frame: _Frame, norm: Normalize, cmap: str | Colormap = _CMAP
-) -> tuple[PolyCollection, PolyCollection]:
-    """Draw the points of ``frame`` as squares: grains by von Mises stress, walls in grey."""
-    grains = PolyCollection(
-        _squares(frame.positions[~frame.wall], frame.side[~frame.wall]),
-        array=frame.von_mises[~frame.wall],
-        norm=norm,
-        cmap=cmap,
-        edgecolors="none",
-    )
-    walls = PolyCollection(
-        _squares(frame.positions[frame.wall], frame.side[frame.wall]),
-        facecolors=_WALL_COLOR,
-        edgecolors="none",
-    )
-    ax.add_collection(grains, autolim=False)
-    ax.add_collection(walls, autolim=False)
-    return grains, walls
-
-
-def _update_points(collections: tuple[PolyCollection, PolyCollection], frame: _Frame) -> None:
-    """Move the squares drawn by :func:`_draw_points` to ``frame``."""
-    grains, walls = collections
-    grains.set_verts(_squares(frame.positions[~frame.wall], frame.side[~frame.wall]))
-    grains.set_array(frame.von_mises[~frame.wall])
-    walls.set_verts(_squares(frame.positions[frame.wall], frame.side[frame.wall]))
+def _draw_frame(ax: Axes, frame: _Frame, norm: Normalize, cmap: str | Colormap = _CMAP):
+    """The grains of ``frame`` filled and shaded, their outlines, the walls; returns the
+    filled artist (for the colour bar)."""
+    filled = draw_grains(ax, grain_mesh(frame.points), frame.field, norm, cmap)
+    draw_walls(ax, frame.points)
+    return filled
 
 
 def _frame_axes(ax: Axes, frames: Sequence[_Frame]) -> None:
@@ -334,46 +385,129 @@ def _asphericity_figure(runs: Sequence[_Run]) -> Figure | None:
     return figure
 
 
-def _snapshots_figure(run: _Run) -> Figure:
-    """Four snapshots spread over the compaction, on one von Mises colour scale."""
+def _snapshots_figure(run: _Run, field: FieldChoice) -> Figure:
+    """Four snapshots spread over the compaction, on one colour scale."""
     start, end = run.compaction_times()
     picks = [_nearest_snapshot(run, start + f * (end - start)) for f in _SNAPSHOT_FRACTIONS]
-    frames = [_read_frame(time, path) for time, path in picks]
-    norm = _stress_norm(frames)
-    figure = Figure(figsize=(3.0 * len(frames) + 1.2, 3.8), layout="constrained")
+    frames = [_read_frame(time, path, field) for time, path in picks]
+    norm = _field_norm(frames)
+    figure = Figure(figsize=(3.0 * len(frames) + 1.8, 3.8), layout="constrained")
     axes = figure.subplots(1, len(frames), sharex=True, sharey=True, squeeze=False)[0]
     for ax, frame in zip(axes, frames, strict=True):
-        grains, _ = _draw_points(ax, frame, norm)
+        filled = _draw_frame(ax, frame, norm)
         _frame_axes(ax, frames)
         ax.set_title(f"t = {frame.time:.3g} s\n{_state_title(run, frame.time)}", fontsize=9)
     for ax in axes[1:]:
         ax.set_ylabel("")
-    figure.colorbar(grains, ax=list(axes), label=_STRESS_LABEL, extend="max", shrink=0.85)
-    figure.suptitle(run.label)
+    figure.colorbar(filled, ax=list(axes), label=field.label(), extend="max", shrink=0.85)
+    figure.suptitle(f"{run.label}: {field.caption()}", fontsize=10)
     return figure
 
 
-def _side_by_side_figure(first: _Run, second: _Run) -> Figure:
+def _at_common_strain(runs: Sequence[_Run]) -> list[tuple[float, str]]:
+    """For each run, the snapshot time nearest to the largest wall strain all runs reached,
+    and a title with the run's label, strain and φ there."""
+    target = min(float(np.max(run.strain()[run.compaction])) for run in runs)
+    picks = []
+    for run in runs:
+        times = np.array([t for t, _ in run.snapshots])
+        strains = np.array([(run.h0 - run.at("wall_gap", t)) / run.h0 for t in times])
+        time = float(times[np.argmin(np.abs(strains - target))])
+        strain = (run.h0 - run.at("wall_gap", time)) / run.h0
+        title = f"{run.label}\n" + rf"$\varepsilon$ = {strain:.3f}, $\phi$ = " \
+            f"{run.at('phi', time):.3f}, " + rf"$\sigma_{{yy}}/\sigma_0$ = " \
+            f"{run.at('stress_yy', time) / run.sigma0:.3g}"
+        picks.append((time, title))
+    return picks
+
+
+def _side_by_side_figure(first: _Run, second: _Run, field: FieldChoice) -> Figure:
     """Two runs at the largest wall strain both reached, on one shared colour scale."""
-    target = min(float(np.max(run.strain()[run.compaction])) for run in (first, second))
-    frames, titles = [], []
-    for run in (first, second):
-        rows = np.flatnonzero(run.compaction)
-        row = rows[np.argmin(np.abs(run.strain()[rows] - target))]
-        frame = _read_frame(*_nearest_snapshot(run, float(run.series["time"][row])))
-        strain = (run.h0 - run.at("wall_gap", frame.time)) / run.h0
-        phi = run.at("phi", frame.time)
-        frames.append(frame)
-        titles.append(f"{run.label}\n" + rf"$\varepsilon$ = {strain:.3f}, $\phi$ = {phi:.3f}")
-    norm = _stress_norm(frames)
+    picks = _at_common_strain([first, second])
+    frames = [_read_frame(*_nearest_snapshot(run, time), field)
+              for run, (time, _) in zip((first, second), picks, strict=True)]
+    norm = _field_norm(frames)
     figure = Figure(figsize=(8.0, 4.2), layout="constrained")
     axes = figure.subplots(1, 2)
-    for ax, frame, title in zip(axes, frames, titles, strict=True):
-        grains, _ = _draw_points(ax, frame, norm)
+    for ax, frame, (_, title) in zip(axes, frames, picks, strict=True):
+        filled = _draw_frame(ax, frame, norm)
         _frame_axes(ax, [frame])
         ax.set_title(title, fontsize=9)
-    figure.colorbar(grains, ax=list(axes), label=_STRESS_LABEL, extend="max", shrink=0.85)
+    figure.colorbar(filled, ax=list(axes), label=field.label(), extend="max", shrink=0.85)
     return figure
+
+
+def _contact_snapshot(run: _Run, time: float) -> Path:
+    """The contacts_<step>.vtu written with the points snapshot at ``time``."""
+    pvd = run.folder / "snapshots" / "contacts.pvd"
+    entries = read_pvd(pvd) if pvd.is_file() else []
+    match = [name for t, name in entries if np.isclose(t, time, rtol=1e-12, atol=1e-15)]
+    if not match:
+        raise CaseError(f"{pvd}: no contact snapshot at t = {time:.6g} s")
+    return pvd.parent / match[0]
+
+
+def _pairs_at(run: _Run, time: float) -> PairForces:
+    """The pair forces of the contact snapshot at ``time``."""
+    path = _contact_snapshot(run, time)
+    positions, data = read_points_vtu(path, dim=2)
+    missing = [k for k in ("alpha", "beta", "fn", "status") if k not in data]
+    if missing:
+        raise CaseError(f"{path}: contact snapshot lacks {', '.join(missing)}")
+    return pair_forces(data["alpha"], data["beta"], data["fn"], data["status"], positions)
+
+
+def _chain_panel(run: _Run, time: float, title: str) -> ChainPanel:
+    frame = _read_frame(*_nearest_snapshot(run, time))
+    volume = frame.side**2
+    return ChainPanel(frame.points, grain_mesh(frame.points), _pairs_at(run, frame.time),
+                      body_centres(frame.positions, volume, frame.points.body), title,
+                      frictional=run.friction > 0.0)
+
+
+def _chains_figure(first: _Run, second: _Run) -> Figure:
+    """The contact force networks of two runs at the largest wall strain both reached."""
+    panels = [_chain_panel(run, time, title) for run, (time, title)
+              in zip((first, second), _at_common_strain([first, second]), strict=True)]
+    low = np.min([p.points.positions.min(axis=0) for p in panels], axis=0)
+    high = np.max([p.points.positions.max(axis=0) for p in panels], axis=0)
+    pad = 0.03 * np.max(high - low)
+    return chains_figure(panels, (low - pad, high + pad))
+
+
+def _forces_at_levels(run: _Run, levels: Sequence[float]) -> list[tuple[str, np.ndarray]]:
+    """The grain–grain pair forces pooled over the snapshots whose σ/σ0 lies within a
+    factor 1.25 of each level (the nearest snapshot when none does)."""
+    times = np.array([t for t, _ in run.snapshots])
+    sigma = np.array([run.at("stress_yy", t) for t in times]) / run.sigma0
+    result = []
+    for level in levels:
+        near = np.flatnonzero((sigma >= level / 1.25) & (sigma <= level * 1.25))
+        if near.size == 0:
+            near = np.array([int(np.argmin(np.abs(np.log(np.maximum(sigma, 1e-12) / level))))])
+        pooled = []
+        for t in times[near]:
+            pairs = _pairs_at(run, float(t))
+            walls = set(_read_frame(*_nearest_snapshot(run, float(t))).points.wall_bodies)
+            keep = ~(np.isin(pairs.alpha, list(walls)) | np.isin(pairs.beta, list(walls)))
+            pooled.append(pairs.force[keep])
+        result.append((rf"$\sigma/\sigma_0$ ≈ {level:.3g}", np.concatenate(pooled)))
+    return result
+
+
+def _distribution_levels(runs: Sequence[_Run]) -> list[float]:
+    """Stress levels for P(f/⟨f⟩): 10 and 100 σ0 and 80% of the largest level all runs
+    reached (those above σ0 and reached)."""
+    reached = min(float(np.max(run.series["stress_yy"][run.compaction])) / run.sigma0
+                  for run in runs)
+    return [level for level in (10.0, 100.0, 0.8 * reached) if 1.0 < level <= reached]
+
+
+def _distribution_figure(runs: Sequence[_Run]) -> Figure | None:
+    levels = _distribution_levels(runs)
+    if not levels:
+        return None
+    return distribution_figure([(run.label, _forces_at_levels(run, levels)) for run in runs])
 
 
 def _subsample(count: int, limit: int = _GIF_MAX_FRAMES) -> np.ndarray:
@@ -381,29 +515,40 @@ def _subsample(count: int, limit: int = _GIF_MAX_FRAMES) -> np.ndarray:
     return np.unique(np.linspace(0, count - 1, min(count, limit)).round().astype(int))
 
 
-def _write_animation(run: _Run, path: Path) -> None:
-    """A GIF of the snapshots (at most ~60 frames) on a fixed von Mises colour scale."""
-    frames = [_read_frame(*run.snapshots[i]) for i in _subsample(len(run.snapshots))]
-    norm = _stress_norm(frames)
+def _write_animation(run: _Run, stem: Path, field: FieldChoice) -> Path:
+    """An animation of the snapshots (at most ~60 frames) on a fixed colour scale, with the
+    time, φ/φ0 and σ/σ0 in each frame: ``stem``.mp4 when ffmpeg is available (matplotlib's
+    writer), ``stem``.gif otherwise. Returns the file written."""
+    frames = [_read_frame(*run.snapshots[i], field) for i in _subsample(len(run.snapshots))]
+    norm = _field_norm(frames)
     figure = Figure(figsize=_GIF_SIZE, layout="constrained")
     ax = figure.add_subplot()
-    collections = _draw_points(ax, frames[0], norm)
+    filled = _draw_frame(ax, frames[0], norm)
     _frame_axes(ax, frames)
-    figure.colorbar(collections[0], ax=ax, label=_STRESS_LABEL, extend="max", shrink=0.8)
+    figure.colorbar(filled, ax=ax, label=field.label(), extend="max", shrink=0.8)
 
-    def show(index: int) -> tuple[PolyCollection, PolyCollection]:
+    def show(index: int) -> list:
         frame = frames[index]
-        _update_points(collections, frame)
+        for artist in [*ax.collections, *ax.patches]:
+            artist.remove()
+        _draw_frame(ax, frame, norm)
         title = f"{run.label}, t = {frame.time:.3g} s\n{_state_title(run, frame.time)}"
         ax.set_title(title, fontsize=8)
-        return collections
+        return []
 
     show(0)
     figure.draw_without_rendering()  # lay out once; the frames then keep that layout
     figure.set_layout_engine("none")
 
     animation = FuncAnimation(figure, show, frames=len(frames), blit=False, repeat=False)
-    animation.save(path, writer=PillowWriter(fps=_GIF_FPS), dpi=_GIF_DPI)
+    if FFMpegWriter.isAvailable():
+        path = stem.with_suffix(".mp4")
+        animation.save(path, writer=FFMpegWriter(fps=_GIF_FPS, bitrate=_MP4_KBPS),
+                       dpi=_MP4_DPI)
+    else:
+        path = stem.with_suffix(".gif")
+        animation.save(path, writer=PillowWriter(fps=_GIF_FPS), dpi=_GIF_DPI)
+    return path
 
 
 def _save(figure: Figure, path: Path, written: list[Path]) -> None:
@@ -412,16 +557,20 @@ def _save(figure: Figure, path: Path, written: list[Path]) -> None:
     written.append(path)
 
 
-def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path) -> list[Path]:
+def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path,
+                    field: FieldChoice = DEFAULT_FIELD) -> list[Path]:
     """Draw the figures of one or more compaction runs into ``out_dir``.
 
     Writes ``phi_sigma.png`` (against the top wall's σ_yy), ``phi_sigma_average.png`` (against
     the volume-averaged σ_yy, when series.csv has it) and ``coordination.png`` (all runs
     overlaid), ``asphericity_phi.png`` when the runs wrote grain shapes; for each run with
-    snapshots, ``snapshots.png`` and ``animation.gif`` (``snapshots_<slug>.png`` and
-    ``animation_<slug>.gif`` when several runs are given); and ``side_by_side.png`` for the
-    first two runs with snapshots. Every run is checked before anything is written (an
-    unusable folder raises :class:`CaseError`). Returns the paths written.
+    snapshots, ``snapshots.png`` (the grains shaded by ``field``) and an animation
+    (``animation.mp4`` with ffmpeg, else ``animation.gif``; ``snapshots_<slug>.png`` and
+    ``animation_<slug>.*`` when several runs are given) and ``force_distribution.png``
+    (P(f/⟨f⟩) at a few stress levels); for the first two runs with snapshots,
+    ``side_by_side.png`` and ``force_chains.png`` at the same wall strain. Every run is
+    checked before anything is written (an unusable folder raises :class:`CaseError`).
+    Returns the paths written.
     """
     if not run_dirs:
         raise CaseError("plot_compaction: no run folders given")
@@ -444,12 +593,17 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path) -> list
     ]
     for run, slug in with_snapshots:
         name = f"snapshots_{slug}.png" if several else "snapshots.png"
-        _save(_snapshots_figure(run), out_dir / name, written)
+        _save(_snapshots_figure(run, field), out_dir / name, written)
+    if with_snapshots:
+        distribution = _distribution_figure([run for run, _ in with_snapshots])
+        if distribution is not None:
+            _save(distribution, out_dir / "force_distribution.png", written)
     if len(with_snapshots) >= 2:
         first, second = (run for run, _ in with_snapshots[:2])
-        _save(_side_by_side_figure(first, second), out_dir / "side_by_side.png", written)
+        _save(_side_by_side_figure(first, second, field), out_dir / "side_by_side.png",
+              written)
+        _save(_chains_figure(first, second), out_dir / "force_chains.png", written)
     for run, slug in with_snapshots:
-        path = out_dir / (f"animation_{slug}.gif" if several else "animation.gif")
-        _write_animation(run, path)
-        written.append(path)
+        stem = out_dir / (f"animation_{slug}" if several else "animation")
+        written.append(_write_animation(run, stem, field))
     return written
