@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from softgrains.io import PvdSeries, read_points_vtu, read_pvd, write_points_vtu
+from softgrains.io.vtk import _read_data_array
 
 
 @pytest.mark.parametrize("dim", [2, 3])
@@ -75,3 +76,22 @@ def test_pvd_lists_every_step_and_stays_valid(tmp_path: Path) -> None:
             (t, f"snapshots/step_{s:06d}.vtu") for s, t in enumerate(times[: step + 1])
         ]
     assert not [p for p in tmp_path.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_vtu_lines_carry_their_cell_data(tmp_path: Path) -> None:
+    """The force chains' file: line cells between given points, with cell arrays."""
+    path = tmp_path / "chains.vtu"
+    points = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [2.0, 1.0]])
+    write_points_vtu(path, points, {}, np.array([[0, 1], [2, 3]]),
+                     {"force": np.array([3.0, 5.0]), "alpha": np.array([0, 1], np.int32)})
+    piece = ET.parse(path).getroot().find("UnstructuredGrid/Piece")
+    assert piece.attrib == {"NumberOfPoints": "4", "NumberOfCells": "2"}
+    cells = {e.attrib["Name"]: _read_data_array(e) for e in piece.iterfind("Cells/DataArray")}
+    assert cells["connectivity"].ravel().tolist() == [0, 1, 2, 3]
+    assert cells["offsets"].ravel().tolist() == [2, 4]
+    assert cells["types"].ravel().tolist() == [3, 3]  # VTK_LINE
+    data = {e.attrib["Name"]: _read_data_array(e) for e in piece.iterfind("CellData/DataArray")}
+    assert data["force"].ravel().tolist() == [3.0, 5.0]
+    assert data["alpha"].ravel().tolist() == [0, 1]
+    with pytest.raises(ValueError, match="cell array 'force'"):
+        write_points_vtu(path, points, {}, np.array([[0, 1]]), {"force": np.zeros(3)})

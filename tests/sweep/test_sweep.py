@@ -171,12 +171,16 @@ def test_a_killed_workers_member_is_rescheduled_and_resumes_from_its_checkpoint(
             time.sleep(0.05)
         else:
             pytest.fail("the member never reached its first checkpoint")
-        worker = next(address for address, keys in client.processing().items()
-                      if f"member-{victim}" in keys)
+        worker = next((address for address, keys in client.processing().items()
+                       if f"member-{victim}" in keys), None)
+        if worker is None:
+            thread.join(timeout=300)
+            pytest.fail("the member ended before its worker could be killed")
         pid = client.run(os.getpid, workers=[worker])[worker]
         os.kill(pid, signal.SIGKILL)
         thread.join(timeout=300)
-        assert not thread.is_alive()
+        if thread.is_alive():
+            pytest.fail("the sweep did not end within 5 minutes of the kill")
     finally:
         client.close()
         cluster.close()

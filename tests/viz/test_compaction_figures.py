@@ -159,7 +159,7 @@ def test_two_runs_write_every_figure(tmp_path: Path) -> None:
     with Image.open(out / "animation_soft-0-3.gif") as gif:
         assert gif.format == "GIF"
         assert gif.n_frames == 7
-        assert gif.size == (320, 320)
+        assert gif.size == (400, 400)
     with Image.open(out / "animation_stiff.gif") as gif:
         assert gif.n_frames == 5
 

@@ -48,10 +48,10 @@ def _pad(array: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     return padded
 
 
-def _components(name: str, values: np.ndarray, n: int) -> np.ndarray:
+def _components(name: str, values: np.ndarray, n: int, kind: str = "point") -> np.ndarray:
     """A point or cell array as ``(n, components)``: scalar -> 1, vector -> 3, tensor -> 9."""
     if values.shape[:1] != (n,):
-        raise ValueError(f"point array {name!r} has shape {values.shape}, expected ({n}, ...)")
+        raise ValueError(f"{kind} array {name!r} has shape {values.shape}, expected ({n}, ...)")
     if values.ndim == 1:
         return values.reshape(n, 1)
     if values.ndim == 2 and values.shape[1] in (2, 3):
@@ -59,7 +59,7 @@ def _components(name: str, values: np.ndarray, n: int) -> np.ndarray:
     if values.ndim == 3 and values.shape[1:] in ((2, 2), (3, 3)):
         return _pad(values, (n, 3, 3)).reshape(n, 9)
     raise ValueError(
-        f"point array {name!r} has shape {values.shape}: expected (n,), (n, d) or (n, d, d) "
+        f"{kind} array {name!r} has shape {values.shape}: expected (n,), (n, d) or (n, d, d) "
         "with d = 2 or 3"
     )
 
@@ -122,7 +122,8 @@ def write_points_vtu(
     if line_data:
         cell_data = ET.SubElement(piece, "CellData")
         for name, values in line_data.items():
-            _data_array(cell_data, _components(name, np.asarray(values), len(types)), name)
+            _data_array(cell_data, _components(name, np.asarray(values), len(types), "cell"),
+                        name)
     points = ET.SubElement(piece, "Points")
     _data_array(points, _pad(positions, (n, 3)))
     cells = ET.SubElement(piece, "Cells")

@@ -22,7 +22,7 @@ from softgrains.contact.local_law import SLIP
 @dataclass(frozen=True)
 class PairForces:
     """The pairs of one frame: body indices (k,) each, summed normal force F_ab (k,),
-    contact point (k, d) and the share of F_ab carried by slipping nodes (k,)."""
+    contact point (k, d) and the share of F_ab carried by frictional slipping nodes (k,)."""
 
     alpha: np.ndarray
     beta: np.ndarray
@@ -30,15 +30,14 @@ class PairForces:
     point: np.ndarray
     slip_share: np.ndarray
 
-    def between(self, bodies: set[int]) -> np.ndarray:
-        """Mask of the pairs whose two bodies are both in ``bodies`` (e.g. the grains)."""
-        return np.isin(self.alpha, list(bodies)) & np.isin(self.beta, list(bodies))
-
 
 def pair_forces(alpha: np.ndarray, beta: np.ndarray, fn: np.ndarray, status: np.ndarray,
-                position: np.ndarray) -> PairForces:
+                position: np.ndarray, ft: np.ndarray | None = None) -> PairForces:
     """Sum per-node contact records into pair forces (see the module docstring); a pair
-    is unordered (α, β and β, α are one pair)."""
+    is unordered (α, β and β, α are one pair). A pair presses when one of its nodes has
+    f_n > 0 (the criterion of the coordination number, observe/compaction.py). A node
+    counts as slipping when its status is slip and, if ``ft`` is given, it carries a
+    tangential force (|f_t| > 10⁻⁹ f_n): without friction every node "slips"."""
     alpha, beta = np.asarray(alpha, np.int64), np.asarray(beta, np.int64)
     fn = np.asarray(fn, float)
     pressing = fn > 0.0
@@ -46,7 +45,10 @@ def pair_forces(alpha: np.ndarray, beta: np.ndarray, fn: np.ndarray, status: np.
     high = np.maximum(alpha, beta)[pressing]
     f = fn[pressing]
     x = np.asarray(position, float)[pressing]
-    slipping = (np.asarray(status) == SLIP)[pressing]
+    slipping = np.asarray(status) == SLIP
+    if ft is not None:
+        slipping &= np.abs(np.asarray(ft, float)) > 1e-9 * np.abs(fn)
+    slipping = slipping[pressing]
     d = x.shape[1] if x.ndim == 2 else 2
     if f.size == 0:
         none = np.zeros(0, np.int64)
@@ -90,7 +92,8 @@ def chain_segments(pairs: PairForces, centres: dict[int, np.ndarray], walls: set
 
 
 def force_distribution(forces: np.ndarray, bins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """P(f/⟨f⟩): the probability density of the forces normalised by their mean, on
+    """P(f/⟨f⟩): the probability density of the forces normalised by their mean (pass
+    forces already divided by their own frame's mean to pool frames: then ⟨f⟩ = 1), on
     ``bins`` (edges in units of ⟨f⟩), normalised by all the forces (those outside the
     bins included), so that it integrates to the share inside; returns (bin centres,
     density)."""
@@ -114,7 +117,7 @@ class ChainLines:
 def chain_lines(model, state, records: dict[str, np.ndarray]) -> ChainLines:
     """The chains of the current state from the contact records of a snapshot."""
     pairs = pair_forces(records["alpha"], records["beta"], records["fn"], records["status"],
-                        records["position"])
+                        records["position"], records["ft"])
     centres = body_centres(state.x, state.vol, model.body_id)
     walls = {b.index for b in model.bodies if not b.deformable}
     segments = chain_segments(pairs, centres, walls)

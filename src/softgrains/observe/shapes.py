@@ -45,7 +45,9 @@ def grain_outline(x: np.ndarray, F: np.ndarray, side: np.ndarray,
     """The outline (m, 2) of one grain: the longest closed line at half the grain's median
     coverage (½ where the cells tile) of its points' deformed cells F_p·[−s_p/2, s_p/2]²
     (s_p = ``side``) rastered at δ/8 (δ/``pixels_per_spacing``) and blurred over σ = δ
-    (δ the median side)."""
+    (δ the median side). The enclosed area is within 1% of Σ V_p for disks of radius ≥ 5δ
+    (lattice or rings seeding); below that the blur dominates (radius 3δ: 12% large for
+    lattice cells, 21% for rings)."""
     if x.shape[1] != 2:
         raise NotImplementedError("grain outlines are written for 2D")
     side = np.asarray(side, float)

@@ -16,17 +16,21 @@ def von_mises(sigma: np.ndarray) -> np.ndarray:
 
 def project_per_grain(x: np.ndarray, vol: np.ndarray, values: np.ndarray, grain: np.ndarray,
                       spacing: float) -> np.ndarray:
-    """A point field smoothed for display: a linear least-squares fit at the nodes of a grid
-    of ``spacing``, interpolated back with linear hats, each grain on its own nodes (grains
-    do not blur into each other), then shifted to keep each grain's volume-weighted mean:
+    """A point field smoothed for display (a moving-least-squares recovery): a linear
+    least-squares fit at each node of a grid of ``spacing``, the fits blended at the points
+    with linear hats over the nodes where the fit is well posed, each grain on its own
+    nodes (grains do not blur into each other), then shifted to keep each grain's
+    volume-weighted mean:
 
-        (a_I, b_I) = argmin Σ_p N_I(x_p) V_p (a + b·(x_p − x_I) − v_p)²,   v_I = a_I,
-        ṽ_p = Σ_I N_I(x_p) v_I + c_g,   c_g such that Σ_{p∈g} V_p ṽ_p = Σ_{p∈g} V_p v_p.
+        (a_I, b_I) = argmin Σ_p N_I(x_p) V_p (a + b·(x_p − x_I) − v_p)²,
+        ṽ_p = Σ_{I fitted} N_I(x_p) (a_I + b_I·(x_p − x_I)) / Σ_{I fitted} N_I(x_p) + c_g,
+        c_g such that Σ_{p∈g} V_p ṽ_p = Σ_{p∈g} V_p v_p.
 
-    A linear field comes back unchanged (c_g = 0); a node whose points cannot fix a
-    gradient (fewer than d + 1 of them, or nearly collinear) takes their weighted mean.
-    ``values`` is (n, ...) (scalars, vectors or tensors, component by component); ``x``
-    is (n, d), any d."""
+    A node whose points cannot fix a gradient (too few, or nearly collinear: at a grain's
+    edge) is left out; a point with no fitted node keeps its own value. A linear field
+    comes back unchanged (c_g = 0); peaks narrower than about two spacings are lowered.
+    ``values`` is (n, ...) (scalars, vectors or tensors, component by component); ``x`` is
+    (n, d), any d."""
     x = np.asarray(x, float)
     n, d = x.shape
     vol = np.asarray(vol, float)
@@ -53,17 +57,24 @@ def project_per_grain(x: np.ndarray, vol: np.ndarray, values: np.ndarray, grain:
                               for c in range(flat.shape[1])], axis=1)
                     for i in range(d + 1)], axis=1)  # (nodes, d + 1, components)
     mass = moments[:, 0, 0]
-    nodal = np.where(mass[:, None] > 0.0, rhs[:, 0, :] / np.where(mass > 0.0, mass, 1.0)[:, None],
-                     0.0)
     # the gradient fit where the second moments (about the points' centroid) are well posed
     spread = moments[:, 1:, 1:] - np.einsum("ni,nj->nij", moments[:, 0, 1:], moments[:, 0, 1:]) \
         / np.where(mass > 0.0, mass, 1.0)[:, None, None]
     smallest = np.linalg.eigvalsh(spread)[:, 0] / np.where(mass > 0.0, mass, 1.0)
     fit = smallest > 1e-3  # points spread over at least ~3% of a cell in every direction
+    coefficients = np.zeros_like(rhs)  # (nodes, 1 + d, components): a_I, then b_I
     if np.any(fit):
-        nodal[fit] = np.linalg.solve(moments[fit], rhs[fit])[:, 0, :]
-    smoothed = np.stack([np.bincount(point, hat * nodal[node, c], minlength=n)
+        coefficients[fit] = np.linalg.solve(moments[fit], rhs[fit])
+    # back to the points over the fitted nodes, each node's fit taken at the point
+    # (a point with no fitted node keeps its own value)
+    use = hat * fit[node]
+    total = np.bincount(point, use, minlength=n)
+    at_point = np.einsum("ki,kic->kc", basis, coefficients[node])  # a_I + b_I·(x_p − x_I)
+    smoothed = np.stack([np.bincount(point, use * at_point[:, c], minlength=n)
                          for c in range(flat.shape[1])], axis=1)
+    covered = total > 0.0
+    smoothed[covered] /= total[covered, None]
+    smoothed[~covered] = flat[~covered]
     volume = np.bincount(grain, vol)
     shift = np.stack([np.bincount(grain, vol * (flat[:, c] - smoothed[:, c]))
                       for c in range(flat.shape[1])], axis=1)

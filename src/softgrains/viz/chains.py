@@ -26,16 +26,14 @@ DISTRIBUTION_BINS = np.linspace(0.0, 4.0, 17)
 
 @dataclass(frozen=True)
 class ChainPanel:
-    """One panel: the frame's points, its grain mesh (outlines), pair forces, body centres,
-    a title, and whether the contacts have friction (slipping is marked only then: without
-    friction every contact slips)."""
+    """One panel: the frame's points, its grain mesh (outlines), pair forces, body centres
+    and a title."""
 
     points: GrainPoints
     mesh: GrainMesh
     pairs: PairForces
     centres: dict[int, np.ndarray]
     title: str
-    frictional: bool = True
 
 
 def chain_widths(force: np.ndarray, largest: float) -> np.ndarray:
@@ -62,7 +60,7 @@ def draw_chains(ax: Axes, panel: ChainPanel, norm: Normalize) -> LineCollection:
                            array=pairs.force[order], cmap=_CHAIN_CMAP, norm=norm,
                            capstyle="round")
     ax.add_collection(lines, autolim=False)
-    slipping = (pairs.slip_share > 0.5) & panel.frictional
+    slipping = pairs.slip_share > 0.5
     if np.any(slipping):
         ax.plot(pairs.point[slipping, 0], pairs.point[slipping, 1], linestyle="none",
                 marker="o", markersize=3.5, markerfacecolor="none",
@@ -89,7 +87,7 @@ def chains_figure(panels: Sequence[ChainPanel], limits: tuple[np.ndarray, np.nda
     axes[0].set_ylabel("y [m]")
     figure.colorbar(lines, ax=list(axes), shrink=0.85,
                     label="pair normal force per unit depth [N/m]\n(line width ∝ force)")
-    if any(p.frictional and np.any(p.pairs.slip_share > 0.5) for p in panels):
+    if any(np.any(p.pairs.slip_share > 0.5) for p in panels):
         axes[-1].legend(handles=[Line2D([], [], linestyle="none", marker="o",
                                         markerfacecolor="none", markeredgecolor=_SLIP_COLOR,
                                         label="sliding contact")],
@@ -109,6 +107,8 @@ def distribution_figure(curves: Sequence[tuple[str, Sequence[tuple[str, np.ndarr
             shown = density > 0.0
             ax.plot(centres[shown], density[shown], marker="o", markersize=3,
                     label=f"{level} ({forces.size} pairs)")
+        ax.text(0.98, 0.02, "forces over their snapshot's mean, pooled", fontsize=6,
+                ha="right", va="bottom", transform=ax.transAxes)
         ax.set_yscale("log")
         ax.set_xlabel(r"$f/\langle f\rangle$ [–]")
         ax.set_title(label, fontsize=9)

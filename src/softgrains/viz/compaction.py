@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import re
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,9 +33,8 @@ _REQUIRED_PROTOCOL = ("sigma0", "phi0", "h0")
 _COMPACTION = "compaction"
 _DPI = 150
 _CMAP = "viridis"
-_WALL_COLOR = "0.6"
 _SNAPSHOT_FRACTIONS = (0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0)
-_GIF_SIZE, _GIF_DPI, _GIF_FPS, _GIF_MAX_FRAMES = (4.0, 4.0), 80, 8, 60
+_GIF_SIZE, _GIF_DPI, _GIF_FPS, _GIF_MAX_FRAMES = (4.0, 4.0), 100, 8, 60
 _MP4_DPI, _MP4_KBPS = 150, 1500  # 60 frames at 8 fps: ~1.4 MB
 _CLIP_PERCENTILE = 99.0
 SMOOTHING_SPACINGS = 1.0  # smoothing grid in point spacings δ (benchmarks/stress_scatter.py)
@@ -57,7 +55,6 @@ class _Run:
     series: dict[str, np.ndarray]
     compaction: np.ndarray  # boolean mask of the compaction rows of ``series``
     snapshots: list[tuple[float, Path]]
-    friction: float  # contact.friction of the run's case.toml (0 when not found)
 
     def at(self, column: str, time: float) -> float:
         """``column`` linearly interpolated at ``time``."""
@@ -95,9 +92,11 @@ class FieldChoice:
     def caption(self) -> str:
         """One sentence on what the shading shows."""
         name = _FIELD_NAMES.get(self.name, self.name).split(" [")[0]
+        what = "of the stress tensor" if self.name in ("von_mises", "pressure") else ""
         if self.smoothed:
-            return (f"{name}: least-squares fit per grain on a grid of the point spacing "
-                    "(each grain's mean kept)")
+            return (f"{name}: least-squares fits {what} per grain on a grid of the point "
+                    "spacing (each grain's mean kept; peaks under two spacings lowered)"
+                    ).replace("  ", " ")
         return f"{name} at the material points, interpolated linearly between them"
 
 
@@ -183,17 +182,7 @@ def _load_run(folder: str | Path) -> _Run:
         series=series,
         compaction=compaction,
         snapshots=_snapshot_files(folder),
-        friction=_friction(folder),
     )
-
-
-def _friction(folder: Path) -> float:
-    """contact.friction of ``folder/case.toml`` (0 when it cannot be read)."""
-    try:
-        case = tomllib.loads((folder / "case.toml").read_text(encoding="utf-8"))
-        return float(case.get("contact", {}).get("friction", 0.0))
-    except (OSError, ValueError, TypeError, AttributeError):
-        return 0.0
 
 
 def _read_frame(time: float, path: Path, field: FieldChoice = DEFAULT_FIELD) -> _Frame:
@@ -255,15 +244,19 @@ def _slugs(runs: Sequence[_Run]) -> list[str]:
     return slugs
 
 
-def _field_norm(frames: Sequence[_Frame]) -> Normalize:
-    """One colour scale for the grains of every frame: from 0 (or the 1st percentile when
-    the field goes negative) to the 99th percentile."""
+def _field_norm(frames: Sequence[_Frame], field: FieldChoice) -> tuple[Normalize, str]:
+    """One colour scale for the grains of every frame, and the colour bar's ``extend``:
+    von Mises stress from 0 to its 99th percentile; other fields from the 1st to the 99th
+    percentile."""
     values = np.concatenate([frame.field[frame.grain] for frame in frames])
     if not values.size:
-        return Normalize(vmin=0.0, vmax=1.0)
+        return Normalize(vmin=0.0, vmax=1.0), "neither"
     top = float(np.percentile(values, _CLIP_PERCENTILE))
-    low = min(0.0, float(np.percentile(values, 100.0 - _CLIP_PERCENTILE)))
-    return Normalize(vmin=low, vmax=top if top > low else low + 1.0)
+    if field.name == "von_mises":
+        low, extend = 0.0, "max"
+    else:
+        low, extend = float(np.percentile(values, 100.0 - _CLIP_PERCENTILE)), "both"
+    return Normalize(vmin=low, vmax=top if top > low else low + 1.0), extend
 
 
 def _draw_frame(ax: Axes, frame: _Frame, norm: Normalize, cmap: str | Colormap = _CMAP):
@@ -390,7 +383,7 @@ def _snapshots_figure(run: _Run, field: FieldChoice) -> Figure:
     start, end = run.compaction_times()
     picks = [_nearest_snapshot(run, start + f * (end - start)) for f in _SNAPSHOT_FRACTIONS]
     frames = [_read_frame(time, path, field) for time, path in picks]
-    norm = _field_norm(frames)
+    norm, extend = _field_norm(frames, field)
     figure = Figure(figsize=(3.0 * len(frames) + 1.8, 3.8), layout="constrained")
     axes = figure.subplots(1, len(frames), sharex=True, sharey=True, squeeze=False)[0]
     for ax, frame in zip(axes, frames, strict=True):
@@ -399,7 +392,7 @@ def _snapshots_figure(run: _Run, field: FieldChoice) -> Figure:
         ax.set_title(f"t = {frame.time:.3g} s\n{_state_title(run, frame.time)}", fontsize=9)
     for ax in axes[1:]:
         ax.set_ylabel("")
-    figure.colorbar(filled, ax=list(axes), label=field.label(), extend="max", shrink=0.85)
+    figure.colorbar(filled, ax=list(axes), label=field.label(), extend=extend, shrink=0.85)
     figure.suptitle(f"{run.label}: {field.caption()}", fontsize=10)
     return figure
 
@@ -426,7 +419,7 @@ def _side_by_side_figure(first: _Run, second: _Run, field: FieldChoice) -> Figur
     picks = _at_common_strain([first, second])
     frames = [_read_frame(*_nearest_snapshot(run, time), field)
               for run, (time, _) in zip((first, second), picks, strict=True)]
-    norm = _field_norm(frames)
+    norm, extend = _field_norm(frames, field)
     figure = Figure(figsize=(8.0, 4.2), layout="constrained")
     axes = figure.subplots(1, 2)
     for ax, frame, (_, title) in zip(axes, frames, picks, strict=True):
@@ -454,15 +447,15 @@ def _pairs_at(run: _Run, time: float) -> PairForces:
     missing = [k for k in ("alpha", "beta", "fn", "status") if k not in data]
     if missing:
         raise CaseError(f"{path}: contact snapshot lacks {', '.join(missing)}")
-    return pair_forces(data["alpha"], data["beta"], data["fn"], data["status"], positions)
+    return pair_forces(data["alpha"], data["beta"], data["fn"], data["status"], positions,
+                       data.get("ft"))
 
 
 def _chain_panel(run: _Run, time: float, title: str) -> ChainPanel:
-    frame = _read_frame(*_nearest_snapshot(run, time))
+    frame = _read_frame(*_nearest_snapshot(run, time), FieldChoice("J", smoothed=False))
     volume = frame.side**2
     return ChainPanel(frame.points, grain_mesh(frame.points), _pairs_at(run, frame.time),
-                      body_centres(frame.positions, volume, frame.points.body), title,
-                      frictional=run.friction > 0.0)
+                      body_centres(frame.positions, volume, frame.points.body), title)
 
 
 def _chains_figure(first: _Run, second: _Run) -> Figure:
@@ -476,10 +469,12 @@ def _chains_figure(first: _Run, second: _Run) -> Figure:
 
 
 def _forces_at_levels(run: _Run, levels: Sequence[float]) -> list[tuple[str, np.ndarray]]:
-    """The grain–grain pair forces pooled over the snapshots whose σ/σ0 lies within a
-    factor 1.25 of each level (the nearest snapshot when none does)."""
+    """The grain–grain pair forces, each over its snapshot's mean, pooled over the
+    snapshots whose σ/σ0 lies within a factor 1.25 of each level (the nearest snapshot
+    when none does; the label gives the σ/σ0 range actually pooled)."""
     times = np.array([t for t, _ in run.snapshots])
     sigma = np.array([run.at("stress_yy", t) for t in times]) / run.sigma0
+    walls = list(_wall_bodies(run))
     result = []
     for level in levels:
         near = np.flatnonzero((sigma >= level / 1.25) & (sigma <= level * 1.25))
@@ -488,19 +483,33 @@ def _forces_at_levels(run: _Run, levels: Sequence[float]) -> list[tuple[str, np.
         pooled = []
         for t in times[near]:
             pairs = _pairs_at(run, float(t))
-            walls = set(_read_frame(*_nearest_snapshot(run, float(t))).points.wall_bodies)
-            keep = ~(np.isin(pairs.alpha, list(walls)) | np.isin(pairs.beta, list(walls)))
-            pooled.append(pairs.force[keep])
-        result.append((rf"$\sigma/\sigma_0$ ≈ {level:.3g}", np.concatenate(pooled)))
+            keep = ~(np.isin(pairs.alpha, walls) | np.isin(pairs.beta, walls))
+            if np.any(keep):
+                pooled.append(pairs.force[keep] / pairs.force[keep].mean())
+        low, high = sigma[near].min(), sigma[near].max()
+        span = f"{low:.3g}" if np.isclose(low, high, rtol=0.01) else f"{low:.3g}–{high:.3g}"
+        result.append((rf"$\sigma/\sigma_0$ = {span}",
+                       np.concatenate(pooled) if pooled else np.zeros(0)))
     return result
 
 
+def _wall_bodies(run: _Run) -> set[int]:
+    """The kinematic bodies of a run (from its first snapshot: walls stay walls)."""
+    _, data = read_points_vtu(run.snapshots[0][1], dim=2)
+    kinematic = data.get("kinematic", np.zeros(len(data["body"]))).astype(int) == 1
+    return set(np.unique(data["body"][kinematic]).astype(int).tolist())
+
+
 def _distribution_levels(runs: Sequence[_Run]) -> list[float]:
-    """Stress levels for P(f/⟨f⟩): 10 and 100 σ0 and 80% of the largest level all runs
-    reached (those above σ0 and reached)."""
+    """Stress levels for P(f/⟨f⟩): 10 and 100 σ0 where all runs reached them, and 80% of
+    the largest stress all runs reached unless its window overlaps another level's."""
     reached = min(float(np.max(run.series["stress_yy"][run.compaction])) / run.sigma0
                   for run in runs)
-    return [level for level in (10.0, 100.0, 0.8 * reached) if 1.0 < level <= reached]
+    levels = [level for level in (10.0, 100.0) if level <= reached]
+    last = 0.8 * reached
+    if last > 1.0 and all(abs(np.log(last / level)) > np.log(1.25 ** 2) for level in levels):
+        levels.append(last)
+    return levels
 
 
 def _distribution_figure(runs: Sequence[_Run]) -> Figure | None:
@@ -520,12 +529,12 @@ def _write_animation(run: _Run, stem: Path, field: FieldChoice) -> Path:
     time, φ/φ0 and σ/σ0 in each frame: ``stem``.mp4 when ffmpeg is available (matplotlib's
     writer), ``stem``.gif otherwise. Returns the file written."""
     frames = [_read_frame(*run.snapshots[i], field) for i in _subsample(len(run.snapshots))]
-    norm = _field_norm(frames)
+    norm, extend = _field_norm(frames, field)
     figure = Figure(figsize=_GIF_SIZE, layout="constrained")
     ax = figure.add_subplot()
     filled = _draw_frame(ax, frames[0], norm)
     _frame_axes(ax, frames)
-    figure.colorbar(filled, ax=ax, label=field.label(), extend="max", shrink=0.8)
+    figure.colorbar(filled, ax=ax, label=field.label(), extend=extend, shrink=0.8)
 
     def show(index: int) -> list:
         frame = frames[index]
@@ -594,15 +603,18 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path,
     for run, slug in with_snapshots:
         name = f"snapshots_{slug}.png" if several else "snapshots.png"
         _save(_snapshots_figure(run, field), out_dir / name, written)
-    if with_snapshots:
-        distribution = _distribution_figure([run for run, _ in with_snapshots])
+    with_contacts = [run for run, _ in with_snapshots
+                     if (run.folder / "snapshots" / "contacts.pvd").is_file()]
+    if with_contacts:
+        distribution = _distribution_figure(with_contacts)
         if distribution is not None:
             _save(distribution, out_dir / "force_distribution.png", written)
     if len(with_snapshots) >= 2:
         first, second = (run for run, _ in with_snapshots[:2])
         _save(_side_by_side_figure(first, second, field), out_dir / "side_by_side.png",
               written)
-        _save(_chains_figure(first, second), out_dir / "force_chains.png", written)
+        if first in with_contacts and second in with_contacts:
+            _save(_chains_figure(first, second), out_dir / "force_chains.png", written)
     for run, slug in with_snapshots:
         stem = out_dir / (f"animation_{slug}" if several else "animation")
         written.append(_write_animation(run, stem, field))
