@@ -17,8 +17,8 @@ stage once after a warm-up on a small frame (Numba compilation and imports exclu
 from __future__ import annotations
 
 import argparse
-import time
 import resource
+import time
 
 import numpy as np
 from matplotlib.colors import Normalize

@@ -104,8 +104,8 @@ def _parser() -> argparse.ArgumentParser:
                       "snapshots")
     plot.add_argument("--raw", action="store_true",
                       help="shade the raw point values instead of the field smoothed per "
-                      "grain (least-squares fit on a grid of the point spacing, each "
-                      "grain's mean kept)")
+                      "grain (least-squares fits on a grid of one cell, each grain's mean "
+                      "kept)")
     plot.set_defaults(command=_plot)
 
     sweep = commands.add_parser(

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.collections import LineCollection
+from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
@@ -48,9 +48,8 @@ def draw_chains(ax: Axes, panel: ChainPanel, norm: Normalize) -> LineCollection:
     """The grains as light outlines, the walls, and one segment per pressing pair with its
     width and colour from the pair's normal force; slipping pairs (most of their force on
     slipping nodes) are marked at their contact point."""
-    for outline in panel.mesh.outlines:
-        ax.fill(outline[:, 0], outline[:, 1], facecolor=_GRAIN_FILL, edgecolor="0.5",
-                linewidth=0.4)
+    ax.add_collection(PolyCollection(panel.mesh.outlines, facecolors=_GRAIN_FILL,
+                                     edgecolors="0.5", linewidths=0.4), autolim=False)
     draw_walls(ax, panel.points)
     pairs = panel.pairs
     segments = chain_segments(pairs, panel.centres, set(panel.points.wall_bodies))

@@ -37,7 +37,7 @@ _SNAPSHOT_FRACTIONS = (0.0, 1.0 / 3.0, 2.0 / 3.0, 1.0)
 _GIF_SIZE, _GIF_DPI, _GIF_FPS, _GIF_MAX_FRAMES = (4.0, 4.0), 100, 8, 60
 _MP4_DPI, _MP4_KBPS = 150, 1500  # 60 frames at 8 fps: ~1.4 MB
 _CLIP_PERCENTILE = 99.0
-SMOOTHING_SPACINGS = 1.0  # smoothing grid in point spacings δ (benchmarks/stress_scatter.py)
+SMOOTHING_SPACINGS = 2.0  # smoothing grid in point spacings δ: h for 2 points per cell
 _PHI_LABEL = r"$\phi/\phi_0$ [–]"
 _SIGMA_LABEL = r"$\sigma_{yy}/\sigma_0$ [–]"
 _SIGMA_AVG_LABEL = r"$\langle\sigma_{yy}\rangle/\sigma_0$ (sample average) [–]"
@@ -94,9 +94,8 @@ class FieldChoice:
         name = _FIELD_NAMES.get(self.name, self.name).split(" [")[0]
         what = "of the stress tensor" if self.name in ("von_mises", "pressure") else ""
         if self.smoothed:
-            return (f"{name}: least-squares fits {what} per grain on a grid of the point "
-                    "spacing (each grain's mean kept; peaks under two spacings lowered)"
-                    ).replace("  ", " ")
+            return (f"{name}: least-squares fits {what} per grain on a grid of one cell "
+                    "(each grain's mean kept; peaks under a cell lowered)").replace("  ", " ")
         return f"{name} at the material points, interpolated linearly between them"
 
 
@@ -213,7 +212,7 @@ def _read_frame(time: float, path: Path, field: FieldChoice = DEFAULT_FIELD) -> 
         raise CaseError(f"{path}: no scalar point field {field.name!r}; choose von_mises, "
                         f"pressure or one of {', '.join(scalars)}")
     if field.smoothed and field.name in ("von_mises", "pressure") and "stress_smoothed" in data:
-        values = data["stress_smoothed"]  # projected by the run (grid of the point spacing)
+        values = data["stress_smoothed"]  # smoothed by the run on its grid (spacing h)
     elif field.smoothed:
         values = project_per_grain(positions, volume, values, body,
                                    SMOOTHING_SPACINGS * float(np.median(points.side)))
