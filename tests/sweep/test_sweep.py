@@ -113,6 +113,10 @@ def test_a_sweep_runs_on_a_local_cluster_and_a_rerun_skips_and_resumes(tmp_path)
     assert [o.status for o in again] == ["skipped (done before)", "failed",
                                          "skipped (done before)"]
     assert "3 members, 2 done before, 1 to run" in lines[0]
+    # the skipped members keep the wall times of the run that did them
+    walls = [m["wall_time_s"] for m in json.loads((out / "sweep.json").read_text())["members"]]
+    assert walls[0] == report["members"][0]["wall_time_s"] > 0
+    assert walls[2] == report["members"][2]["wall_time_s"] > 0
 
 
 def test_the_sweep_command_prints_the_table_and_exits_non_zero_on_a_failed_member(

@@ -61,7 +61,9 @@ def run_sweep(sweep: Sweep, out: Path, workers: int = 0, scheduler: str | None =
     from dask.distributed import Client, LocalCluster
 
     out.mkdir(parents=True, exist_ok=True)
-    outcomes = {m.name: Outcome(m.name, "skipped (done before)", EXIT_OK)
+    before = _earlier_walls(out)
+    outcomes = {m.name: Outcome(m.name, "skipped (done before)", EXIT_OK,
+                                wall_s=before.get(m.name, 0.0))
                 for m in sweep.members if completed(out / m.name)}
     todo = [m for m in sweep.members if m.name not in outcomes]
     echo(f"sweep {sweep.path.name}: {len(sweep.members)} members, {len(outcomes)} done "
@@ -88,6 +90,17 @@ def run_sweep(sweep: Sweep, out: Path, workers: int = 0, scheduler: str | None =
     _write_report(out, sweep, ordered)
     _ensemble(out, echo)
     return ordered
+
+
+def _earlier_walls(out: Path) -> dict[str, float]:
+    """The wall times of the members an earlier run of the sweep recorded in sweep.json
+    (kept for the members it skips now)."""
+    try:
+        report = json.loads((out / "sweep.json").read_text())
+        return {m["name"]: float(m["wall_time_s"]) for m in report["members"]
+                if m.get("wall_time_s")}
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
 
 
 def _ensemble(out: Path, echo) -> None:
