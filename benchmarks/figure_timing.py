@@ -97,7 +97,7 @@ def measure(count: int) -> dict:
     _, t_draw = timed(draw)
     centres = body_centres(points.positions, volume, points.body)
     low, high = points.positions.min(axis=0), points.positions.max(axis=0)
-    panel = ChainPanel(points, mesh, pairs, centres, "")
+    panel = ChainPanel(points, mesh.outlines, pairs, centres, "")
 
     def chains():
         chains_figure([panel], (low, high)).savefig("/dev/null", format="png", dpi=150)

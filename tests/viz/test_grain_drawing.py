@@ -16,7 +16,13 @@ from softgrains.observe.chains import (
 )
 from softgrains.observe.stress import project_per_grain, von_mises
 from softgrains.viz.chains import ChainPanel, chain_widths, chains_figure, draw_chains
-from softgrains.viz.grains import GrainPoints, draw_grains, grain_mesh, wall_rectangles
+from softgrains.viz.grains import (
+    GrainPoints,
+    draw_grains,
+    grain_mesh,
+    grain_outlines,
+    wall_rectangles,
+)
 
 
 def _frame(grains, wall=None):
@@ -158,7 +164,7 @@ def test_a_two_disk_stack_gives_one_chain_segment_per_pair():
     widths = chain_widths(pairs.force[order], float(pairs.force.max()))
     assert widths[1] == pytest.approx(2.0 * widths[0])
     # drawn: one line per pair, the wall pair twice as wide, one slipping pair marked
-    panel = ChainPanel(points, grain_mesh(points), pairs, centres, "stack")
+    panel = ChainPanel(points, grain_outlines(points), pairs, centres, "stack")
     figure = chains_figure([panel], (np.array([-0.1, -0.3]), np.array([1.1, 1.8])))
     lines = next(c for c in figure.axes[0].collections if isinstance(c, LineCollection))
     assert len(lines.get_segments()) == 2
@@ -171,7 +177,7 @@ def test_a_two_disk_stack_gives_one_chain_segment_per_pair():
                                np.zeros(2))
     assert np.all(frictionless.slip_share == 0.0)
     ax = Figure().add_subplot()
-    draw_chains(ax, ChainPanel(points, grain_mesh(points), frictionless, centres, ""),
+    draw_chains(ax, ChainPanel(points, grain_outlines(points), frictionless, centres, ""),
                 Normalize(0.0, 8.0))
     assert not [line for line in ax.get_lines() if line.get_marker() == "o"]
 

@@ -14,7 +14,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 
 from softgrains.observe.chains import PairForces, chain_segments, force_distribution
-from softgrains.viz.grains import GrainMesh, GrainPoints, draw_walls
+from softgrains.viz.grains import GrainPoints, draw_walls
 
 _WIDEST = 6.0  # line width (points) of the largest pair force of a figure
 _THINNEST = 0.3
@@ -26,11 +26,11 @@ DISTRIBUTION_BINS = np.linspace(0.0, 4.0, 17)
 
 @dataclass(frozen=True)
 class ChainPanel:
-    """One panel: the frame's points, its grain mesh (outlines), pair forces, body centres
-    and a title."""
+    """One panel: the frame's points, its grains' outlines, pair forces, body centres and a
+    title."""
 
     points: GrainPoints
-    mesh: GrainMesh
+    outlines: list[np.ndarray]
     pairs: PairForces
     centres: dict[int, np.ndarray]
     title: str
@@ -48,7 +48,7 @@ def draw_chains(ax: Axes, panel: ChainPanel, norm: Normalize) -> LineCollection:
     """The grains as light outlines, the walls, and one segment per pressing pair with its
     width and colour from the pair's normal force; slipping pairs (most of their force on
     slipping nodes) are marked at their contact point."""
-    ax.add_collection(PolyCollection(panel.mesh.outlines, facecolors=_GRAIN_FILL,
+    ax.add_collection(PolyCollection(panel.outlines, facecolors=_GRAIN_FILL,
                                      edgecolors="0.5", linewidths=0.4), autolim=False)
     draw_walls(ax, panel.points)
     pairs = panel.pairs

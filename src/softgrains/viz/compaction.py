@@ -25,7 +25,13 @@ from softgrains.io.vtk import read_points_vtu, read_pvd
 from softgrains.observe.chains import PairForces, body_centres, pair_forces
 from softgrains.observe.stress import project_per_grain, von_mises
 from softgrains.viz.chains import ChainPanel, chains_figure, distribution_figure
-from softgrains.viz.grains import GrainPoints, draw_grains, draw_walls, grain_mesh
+from softgrains.viz.grains import (
+    GrainPoints,
+    draw_grains,
+    draw_walls,
+    grain_mesh,
+    grain_outlines,
+)
 from softgrains.viz.series import read_run_series
 
 _REQUIRED_COLUMNS = ("time", "phase", "phi", "stress_yy", "coordination", "wall_gap")
@@ -104,14 +110,13 @@ DEFAULT_FIELD = FieldChoice()
 
 @dataclass(frozen=True)
 class _Frame:
-    """One snapshot: its points grouped into grains, the shaded field at the points, and the
-    squares' centres and sides (for the axes' extent)."""
+    """One snapshot: its points grouped into grains, their volumes and the shaded field at
+    the points."""
 
     time: float
     points: GrainPoints
+    volume: np.ndarray
     field: np.ndarray
-    positions: np.ndarray
-    side: np.ndarray
 
     @property
     def grain(self) -> np.ndarray:
@@ -184,12 +189,12 @@ def _load_run(folder: str | Path) -> _Run:
     )
 
 
-def _read_frame(time: float, path: Path, field: FieldChoice = DEFAULT_FIELD) -> _Frame:
-    """Read one snapshot file and compute the field the grains are shaded with."""
+def _read_points(path: Path) -> tuple[GrainPoints, np.ndarray, dict[str, np.ndarray]]:
+    """The points of one snapshot file grouped into grains and walls, their volumes, and
+    all their point data."""
     if not path.is_file():
         raise CaseError(f"{path}: snapshot listed in points.pvd is missing")
     positions, data = read_points_vtu(path)
-    positions = positions[:, :2]
     missing = [name for name in ("volume", "body", "stress", "J") if name not in data]
     if missing:
         raise CaseError(f"{path}: snapshot lacks point data {', '.join(missing)}")
@@ -201,8 +206,14 @@ def _read_frame(time: float, path: Path, field: FieldChoice = DEFAULT_FIELD) -> 
         F = np.sqrt(J)[:, None, None] * np.eye(2)[None, :, :]
     body = data["body"].astype(np.int64)
     kinematic = data.get("kinematic", np.zeros(len(positions))).astype(int) == 1
-    points = GrainPoints(positions, F, np.sqrt(volume / J), body,
+    points = GrainPoints(positions[:, :2], F, np.sqrt(volume / J), body,
                          frozenset(np.unique(body[kinematic]).tolist()))
+    return points, volume, data
+
+
+def _read_frame(time: float, path: Path, field: FieldChoice = DEFAULT_FIELD) -> _Frame:
+    """Read one snapshot file and compute the field the grains are shaded with."""
+    points, volume, data = _read_points(path)
     if field.name in ("von_mises", "pressure"):
         values = data["stress"]  # (n, 3, 3): σ_zz is the plane-strain stress
     elif field.name in data and data[field.name].ndim == 1:
@@ -214,14 +225,13 @@ def _read_frame(time: float, path: Path, field: FieldChoice = DEFAULT_FIELD) -> 
     if field.smoothed and field.name in ("von_mises", "pressure") and "stress_smoothed" in data:
         values = data["stress_smoothed"]  # smoothed by the run on its grid (spacing h)
     elif field.smoothed:
-        values = project_per_grain(positions, volume, values, body,
+        values = project_per_grain(points.positions, volume, values, points.body,
                                    SMOOTHING_SPACINGS * float(np.median(points.side)))
     if field.name == "von_mises":
         values = von_mises(values)
     elif field.name == "pressure":
         values = -np.trace(values, axis1=1, axis2=2) / 3.0
-    return _Frame(time=time, points=points, field=values, positions=positions,
-                  side=np.sqrt(volume))
+    return _Frame(time=time, points=points, volume=volume, field=values)
 
 
 def _nearest_snapshot(run: _Run, time: float) -> tuple[float, Path]:
@@ -268,8 +278,10 @@ def _draw_frame(ax: Axes, frame: _Frame, norm: Normalize, cmap: str | Colormap =
 
 def _frame_axes(ax: Axes, frames: Sequence[_Frame]) -> None:
     """Equal-aspect axes in metres that hold every square of ``frames``."""
-    low = np.min([np.min(f.positions - f.side[:, None] / 2, axis=0) for f in frames], axis=0)
-    high = np.max([np.max(f.positions + f.side[:, None] / 2, axis=0) for f in frames], axis=0)
+    low = np.min([np.min(f.points.positions - np.sqrt(f.volume)[:, None] / 2, axis=0)
+                  for f in frames], axis=0)
+    high = np.max([np.max(f.points.positions + np.sqrt(f.volume)[:, None] / 2, axis=0)
+                   for f in frames], axis=0)
     pad = 0.02 * np.max(high - low)
     ax.set_xlim(low[0] - pad, high[0] + pad)
     ax.set_ylim(low[1] - pad, high[1] + pad)
@@ -451,10 +463,11 @@ def _pairs_at(run: _Run, time: float) -> PairForces:
 
 
 def _chain_panel(run: _Run, time: float, title: str) -> ChainPanel:
-    frame = _read_frame(*_nearest_snapshot(run, time), FieldChoice("J", smoothed=False))
-    volume = frame.side**2
-    return ChainPanel(frame.points, grain_mesh(frame.points), _pairs_at(run, frame.time),
-                      body_centres(frame.positions, volume, frame.points.body), title)
+    """The force network of ``run`` at its snapshot nearest to ``time``."""
+    time, path = _nearest_snapshot(run, time)
+    points, volume, _ = _read_points(path)
+    return ChainPanel(points, grain_outlines(points), _pairs_at(run, time),
+                      body_centres(points.positions, volume, points.body), title)
 
 
 def _chains_figure(first: _Run, second: _Run) -> Figure:
@@ -492,11 +505,9 @@ def _forces_at_levels(run: _Run, levels: Sequence[float]) -> list[tuple[str, np.
     return result
 
 
-def _wall_bodies(run: _Run) -> set[int]:
+def _wall_bodies(run: _Run) -> frozenset[int]:
     """The kinematic bodies of a run (from its first snapshot: walls stay walls)."""
-    _, data = read_points_vtu(run.snapshots[0][1], dim=2)
-    kinematic = data.get("kinematic", np.zeros(len(data["body"]))).astype(int) == 1
-    return set(np.unique(data["body"][kinematic]).astype(int).tolist())
+    return _read_points(run.snapshots[0][1])[0].wall_bodies
 
 
 def _distribution_levels(runs: Sequence[_Run]) -> list[float]:

@@ -72,16 +72,31 @@ class GrainMesh:
         return float(0.5 * np.sum(np.abs(ab[:, 0] * ac[:, 1] - ab[:, 1] * ac[:, 0])))
 
 
+def _grain_points(points: GrainPoints):
+    """(body, indices of its points) of every grain (not a wall) of ``points``."""
+    for body in np.unique(points.body):
+        if int(body) not in points.wall_bodies:
+            yield int(body), np.flatnonzero(points.body == body)
+
+
+def _outline(points: GrainPoints, index: np.ndarray) -> np.ndarray:
+    """The drawn outline of the grain made of the points ``index``."""
+    return grain_outline(points.positions[index], points.F[index], points.side[index],
+                         OUTLINE_PIXELS)
+
+
+def grain_outlines(points: GrainPoints) -> list[np.ndarray]:
+    """The outline of every grain of ``points`` (closed polygons, in body order)."""
+    return [_outline(points, index) for _, index in _grain_points(points)]
+
+
 def grain_mesh(points: GrainPoints) -> GrainMesh:
     """Triangulate every grain of ``points`` (see the module docstring)."""
     vertices, triangles, sources, weights, outlines, grains, owner = [], [], [], [], [], [], []
     count = 0
-    for body in np.unique(points.body):
-        if int(body) in points.wall_bodies:
-            continue
-        index = np.flatnonzero(points.body == body)
+    for body, index in _grain_points(points):
         x = points.positions[index]
-        outline = grain_outline(x, points.F[index], points.side[index], OUTLINE_PIXELS)
+        outline = _outline(points, index)
         spacing = float(np.median(points.side[index]))
         ring = _resample(outline, OUTLINE_SPACING * spacing)
         local = np.vstack([x, ring])
@@ -104,7 +119,7 @@ def grain_mesh(points: GrainPoints) -> GrainMesh:
         weights.append(wts)
         outlines.append(outline)
         owner.append(np.full(int(inside.sum()), len(grains)))
-        grains.append(int(body))
+        grains.append(body)
         count += len(local)
     if not grains:
         none = np.zeros((0, 3), np.int64)
