@@ -322,5 +322,9 @@ def test_stressed_runs_get_the_force_distribution_and_any_field(tmp_path: Path) 
     run = _load_run(soft)
     raw = _side_by_side_figure(run, run, FieldChoice("J", smoothed=False))
     assert "J = det F" in raw.axes[-1].get_ylabel() and "at the points" in raw.axes[-1].get_ylabel()
+    assert "J = det F at the material points" in raw.get_suptitle()
+    bar = next(c.colorbar for ax in raw.axes for c in ax.collections
+               if getattr(c, "colorbar", None) is not None)
+    assert bar.extend == "both"  # J is clipped at both ends (1st and 99th percentiles)
     with pytest.raises(CaseError, match="no scalar point field 'nope'.*von_mises"):
         _side_by_side_figure(run, run, FieldChoice("nope"))

@@ -437,7 +437,8 @@ def _side_by_side_figure(first: _Run, second: _Run, field: FieldChoice) -> Figur
         filled = _draw_frame(ax, frame, norm)
         _frame_axes(ax, [frame])
         ax.set_title(title, fontsize=9)
-    figure.colorbar(filled, ax=list(axes), label=field.label(), extend="max", shrink=0.85)
+    figure.colorbar(filled, ax=list(axes), label=field.label(), extend=extend, shrink=0.85)
+    figure.suptitle(field.caption(), fontsize=8)
     return figure
 
 
