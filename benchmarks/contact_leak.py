@@ -5,7 +5,8 @@ contact treatments in seconds before a compaction run:
    boundary gap between them along the vertical through their centres (points ± δ/2, and
    ± the deformed cell's half-extent ½δ‖Fᵀe_y‖₁), every 10 steps, in cells h;
 2. a disk launched at 0.5 m/s along a frictionless deformable block: its position, speed
-   and how far it has sunk into the block, every 20 steps (it must keep sliding).
+   and how far it has sunk into the block, every 20 steps (it must keep sliding), and the
+   energy the contacts took out so far (≥ 0: a frictionless contact must not inject any).
 
 Session 8 measured with it that the nodal constraint leaks (docs/dev-notes.md, #11):
 
@@ -49,7 +50,7 @@ def stacked(shape: str, dh: int, seeding: str, overrides: list[str]) -> None:
         x, F = sim.state.x, sim.state.F
         ends = []
         for points, side in ((lower, 1.0), (upper, -1.0)):
-            column = np.abs(x[points, 0] - 0.5) <= 0.5 * delta + 1e-12
+            column = np.abs(x[points, 0] - 0.5) <= 0.75 * delta
             y = x[points][column, 1]
             extent = 0.5 * delta * np.abs(F[points][column][:, :, 1]).sum(axis=1)
             ends.append(((y + side * 0.5 * delta), (y + side * extent)))
@@ -66,8 +67,10 @@ def sliding(shape: str, overrides: list[str]) -> None:
     h = sim.model.lattice.h
     delta = h / 2
     row = []
+    dissipated = 0.0
     for k in range(sim.n_steps):
-        sim.step()
+        diag = sim.step()
+        dissipated += diag.contact.dissipation
         if (k + 1) % 20:
             continue
         x, v = sim.state.x, sim.state.v
@@ -75,7 +78,8 @@ def sliding(shape: str, overrides: list[str]) -> None:
         near = np.abs(x[disk, 0] - centre) <= 1.5 * delta
         under = np.abs(x[block, 0] - centre) <= 1.5 * delta
         sink = (x[block][under, 1].max() + delta / 2 - (x[disk][near, 1].min() - delta / 2)) / h
-        row.append(f"x {centre:.3f} m v {v[disk, 0].mean():.3f} m/s sink {sink:+.3f} h")
+        row.append(f"x {centre:.3f} m v {v[disk, 0].mean():.3f} m/s sink {sink:+.3f} h, "
+                   f"contact dissipation {dissipated:+.3g} J")
     print(f"disk sliding on a block, {shape}:\n  " + "\n  ".join(row))
 
 

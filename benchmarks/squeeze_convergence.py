@@ -13,7 +13,7 @@ previous step's end-of-step gap; −: an overlap), the largest penetration of th
 in cells, and the wall time.
 
     python benchmarks/squeeze_convergence.py [--dh 20 40 80] [--dtch 3000 40] [--travel 0.1]
-                                             [--set contact.overlap_removal=1]
+                                             [--set contact.overlap_removal=1] [--log]
 """
 
 from __future__ import annotations
@@ -83,8 +83,8 @@ def penetration(sim: Simulation, h: float) -> float:
     return float(max((y + extent).max() - top, bottom - (y - extent).min()) / h)
 
 
-def run(d_over_h: int, dt_c_over_h: float, travel: float, overrides: dict | None = None
-        ) -> dict:
+def run(d_over_h: int, dt_c_over_h: float, travel: float, overrides: dict | None = None,
+        log: bool = False) -> dict:
     sim = Simulation(load_case(squeeze_case(d_over_h, dt_c_over_h, travel, overrides=overrides)))
     h = 2 * R / d_over_h
     t0 = time.perf_counter()
@@ -99,6 +99,11 @@ def run(d_over_h: int, dt_c_over_h: float, travel: float, overrides: dict | None
         pen.append(penetration(sim, h))
         active = np.any(diag.contacts.impulse != 0.0, axis=1)
         gap.append(float(diag.contacts.gap[active].min()) / h if active.any() else np.inf)
+        if log:  # one line a step, for long runs (D/h 80)
+            print(f"D/h {d_over_h} dt c/h {dt_c_over_h:g} step {len(its)}/{sim.n_steps}: "
+                  f"squeeze {strain[-1]:.4f}, F/(E R) {force[-1]:.5g}, coupling its {its[-1]}, "
+                  f"solver its {solver_its[-1]}, least gap {gap[-1]:.3f} h, "
+                  f"{time.perf_counter() - t0:.0f} s", flush=True)
     wall = time.perf_counter() - t0
     with REFERENCE.open() as f:
         rows = list(csv.DictReader(f))
@@ -143,9 +148,11 @@ def main() -> None:
                         help="plate travel per step, cells (each plate)")
     parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE",
                         help="case overrides, e.g. contact.overlap_removal=1")
+    parser.add_argument("--log", action="store_true", help="print a line per step")
     args = parser.parse_args()
     overrides = {k: _value(v) for k, v in (item.split("=", 1) for item in args.set)}
-    results = [run(dh, dtch, args.travel, overrides) for dtch in args.dtch for dh in args.dh]
+    results = [run(dh, dtch, args.travel, overrides, args.log)
+               for dtch in args.dtch for dh in args.dh]
     print_table(results)
 
 

@@ -25,6 +25,7 @@ from softgrains.io import software_versions
 
 STATE_ARRAYS = ("x", "v", "a", "F", "sigma", "vol", "body_velocity", "body_offset")
 CONTACT_NODE_ARRAYS = ("node", "alpha", "beta", "normal", "local_alpha", "local_beta")
+CONTACT_SITE_ARRAYS = ("site", "position")  # surface contacts only
 CONTACT_ARRAYS = ("impulse", "status", "gap")
 
 
@@ -53,6 +54,9 @@ def snapshot(sim) -> tuple[dict[str, np.ndarray], dict[str, object]]:
     if s.contacts is not None:
         for name in CONTACT_NODE_ARRAYS:
             arrays[f"contacts/{name}"] = getattr(s.contacts.nodes, name).copy()
+        for name in CONTACT_SITE_ARRAYS:
+            if getattr(s.contacts.nodes, name) is not None:
+                arrays[f"contacts/{name}"] = getattr(s.contacts.nodes, name).copy()
         for name in CONTACT_ARRAYS:
             arrays[f"contacts/{name}"] = getattr(s.contacts, name).copy()
     meta = {
@@ -115,7 +119,10 @@ def restore(sim, arrays: dict[str, np.ndarray], meta: dict[str, object]) -> None
     s.time, s.step = float(meta["time"]), int(meta["step"])
     if "contacts/impulse" in arrays:  # copies: a retried step must not change the snapshot
         nodes = ContactNodes(*(arrays[f"contacts/{name}"].copy()
-                               for name in CONTACT_NODE_ARRAYS))
+                               for name in CONTACT_NODE_ARRAYS),
+                             *(arrays[f"contacts/{name}"].copy()
+                               if f"contacts/{name}" in arrays else None
+                               for name in CONTACT_SITE_ARRAYS))
         s.contacts = ContactState(nodes, *(arrays[f"contacts/{name}"].copy()
                                            for name in CONTACT_ARRAYS))
     else:  # no warm start from a failed attempt's contacts

@@ -68,7 +68,8 @@ class Solver:
             relation=c.local_relation, tolerance=c.tolerance, max_iterations=c.max_iterations,
             on_failure=c.on_failure, normal=c.normal, overlap_removal=c.overlap_removal,
             overlap_tolerance=c.overlap_tolerance, keep_closed=c.keep_closed, solver=c.solver,
-            solver_iterations=c.solver_iterations)
+            solver_iterations=c.solver_iterations, grain_sites=c.grain_sites,
+            wall_sites=c.wall_sites)
 
     def body_points(self, state: State, index: int) -> BodyPoints:
         m, sl = self.model, self.model.bodies[index].points

@@ -9,7 +9,7 @@ import pytest
 from softgrains import Simulation, load_case
 
 
-def _two_disks(enabled=True, gap=True):
+def _two_disks(enabled=True, gap=True, grain_sites="nodes"):
     """Sulsky et al. (1994): two elastic disks on the diagonal of a 1 m square, 20 x 20 cells."""
     disk = {"shape": "disk", "radius": 0.2, "material": "gel"}
     return load_case({
@@ -18,7 +18,7 @@ def _two_disks(enabled=True, gap=True):
         "materials": {"gel": {"young": 1000.0, "poisson": 0.3, "density": 1000.0}},
         "bodies": [{**disk, "center": [0.2, 0.2], "velocity": [0.1, 0.1]},
                    {**disk, "center": [0.8, 0.8], "velocity": [-0.1, -0.1]}],
-        "contact": {"enabled": enabled, "gap": gap},
+        "contact": {"enabled": enabled, "gap": gap, "grain_sites": grain_sites},
     })
 
 
@@ -39,14 +39,18 @@ def _block_on_slab(h=0.1, young=1e5, dt=0.01, steps=60, gravity=(0.0, -10.0), co
     }))
 
 
-@pytest.mark.parametrize(("gap", "onset_range"), [(True, (1.4, 1.6)), (False, (1.0, 1.25))],
-                         ids=["gap", "mass-overlap"])
-def test_two_disks_collide_with_exact_momentum_and_no_energy_gain(gap, onset_range):
+@pytest.mark.parametrize(("gap", "sites", "onset_range"),
+                         [(True, "nodes", (1.4, 1.6)), (False, "nodes", (1.0, 1.25)),
+                          (True, "surface", (1.5, 1.6))],
+                         ids=["gap", "mass-overlap", "surface"])
+def test_two_disks_collide_with_exact_momentum_and_no_energy_gain(gap, sites, onset_range):
     """VALIDATION.md B6. Measured (2026-11-23, session 3): the surfaces touch at 1.586 s; the
     impulse starts at 1.50 s with the gap treatment (1.14 s on mass overlap alone); the disks
     leave along the diagonal at 0.81 (0.93) of their speed; momentum stays within 2e-14 of zero;
-    the energy never exceeds its start."""
-    sim = Simulation(_two_disks(gap=gap))
+    the energy never exceeds its start. Point-to-surface contacts (session 11): impulse from
+    1.54 s, momentum within 3e-14 (the surface's rate vectors sum to its normal), energy never
+    above its start, 0.81 of the speed."""
+    sim = Simulation(_two_disks(gap=gap, grain_sites=sites))
     m = sim.model.mass
     a = sim.model.bodies[0].points
     e0 = sim.series_row()["total_energy"]
@@ -72,11 +76,13 @@ def test_without_contact_the_disks_pass_through_each_other():
     assert np.allclose(sim.state.v[sim.model.bodies[0].points].mean(axis=0), [0.1, 0.1])
 
 
-def test_block_resting_on_a_wall_reports_a_constant_force_mg():
+@pytest.mark.parametrize("wall_sites", ["nodes", "surface"])
+def test_block_resting_on_a_wall_reports_a_constant_force_mg(wall_sites):
     """An elastic block released just above a kinematic slab under gravity (θ = 1): once
     settled, the slab pushes it with m g within 1% at every step (no chatter between 2mg
-    and 0). Measured: 0.994–1.003 mg over steps 50–60."""
-    sim = _block_on_slab()
+    and 0). Measured: 0.994–1.003 mg over steps 50–60 (also with the opt-in point-to-face
+    wall contacts, session 11)."""
+    sim = _block_on_slab(contact={"wall_sites": wall_sites})
     weight = 10.0 * sim.model.mass[sim.model.bodies[0].points].sum()
     ratios = []
     for _ in range(sim.n_steps):
@@ -117,14 +123,16 @@ def test_block_on_an_incline_slides_with_the_coulomb_acceleration(mu, expected, 
         assert abs(a) < 0.01 * g
 
 
-@pytest.mark.parametrize("gap", [True, False], ids=["gap", "mass-overlap"])
-def test_resting_block_boundary_gap(gap):
+@pytest.mark.parametrize("gap, wall_sites", [(True, "nodes"), (False, "nodes"),
+                                             (True, "surface")],
+                         ids=["gap", "mass-overlap", "surface"])
+def test_resting_block_boundary_gap(gap, wall_sites):
     """ALGORITHM.md §4: a block released 0.4 h above a slab (h = 0.05) comes to rest with its
     boundary (lowest points − δ/2) within 0.05 h of the slab with the gap treatment; on mass
     overlap alone it stops about half a cell above. Measured (2026-11-23): −0.010 h with the
     gap, +0.45 h without."""
     h = 0.05
-    sim = _block_on_slab(h=h, contact={"gap": gap})
+    sim = _block_on_slab(h=h, contact={"gap": gap, "wall_sites": wall_sites})
     for _ in range(sim.n_steps):
         sim.step()
     bottom = sim.state.x[sim.model.bodies[0].points, 1].min() - 0.25 * h

@@ -306,6 +306,15 @@ class ContactSettings(_Section):
     normal: Literal["difference", "alpha", "beta"] = Field(
         "difference", description="contact normal from the mass gradients of both bodies, "
         "or of α or β alone (exact face normals against kinematic rectangles and disks)")
+    grain_sites: Literal["surface", "nodes"] = Field(
+        "surface", description="where two grains' contacts act: at each grain's outer "
+        "points against the other's kernel-smoothed surface (two passes), or at the nodes "
+        "they share (the contact of sessions 1-10, which lets loaded grains into each other)")
+    wall_sites: Literal["nodes", "surface"] = Field(
+        "nodes", description="where a grain's contacts with a kinematic rectangle or disk "
+        "act: at the nodes they share (exact face normals), or at the grain's outer points "
+        "against the wall's exact face (opt-in: fails the quasi-static squeeze, "
+        "docs/dev-notes.md)")
     local_relation: Literal["delassus", "lumped"] = Field(
         "delassus", description="local compliance: Delassus (bodies' Newton matrices) or "
         "lumped nodal masses")

@@ -48,6 +48,7 @@ from softgrains.contact.problem import (
     residual_norm,
     row_impulses,
 )
+from softgrains.contact.sites import Slots, subset, surface_sites
 from softgrains.contact.solvers import ContactSolverOptions, solve
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
@@ -74,6 +75,8 @@ class CouplingSettings:
     keep_closed: bool = False  # a contact loaded at the previous step starts closed (g ≤ 0)
     solver: str = "newton"  # contact problem solver: newton | nsgs (solvers.py)
     solver_iterations: int = 50  # per contact solve: Newton iterations or NSGS sweeps
+    grain_sites: str = "surface"  # grain–grain contacts at outer points, or at shared nodes
+    wall_sites: str = "nodes"  # grain–wall contacts at shared nodes, or at outer points
 
 
 @dataclass
@@ -105,58 +108,12 @@ class ContactState:
         return _keys(self.nodes)
 
 
-def _keys(nodes: ContactNodes) -> list[tuple[int, int, int]]:
-    """(node, α, β) per contact: what identifies a contact from one step to the next."""
+def _keys(nodes: ContactNodes) -> list[tuple[int, int, int, int]]:
+    """(node, α, β, site) per contact: what identifies a contact from one step to the next
+    (site: −1 at a node, the point's code for a surface contact)."""
+    site = nodes.site if nodes.site is not None else np.full(len(nodes), -1)
     return list(zip(nodes.node.tolist(), nodes.alpha.tolist(), nodes.beta.tolist(),
-                    strict=True))
-
-
-def _subset(contacts: ContactNodes, keep: np.ndarray) -> ContactNodes:
-    return ContactNodes(contacts.node[keep], contacts.alpha[keep], contacts.beta[keep],
-                        contacts.normal[keep], contacts.local_alpha[keep],
-                        contacts.local_beta[keep])
-
-
-class _Slots:
-    """The deformable bodies in contact, their distinct contact rows and compliances."""
-
-    def __init__(self, steps: dict, contacts: ContactNodes) -> None:
-        n = len(contacts)
-        self.bodies: list[int] = []
-        self.rows: list[np.ndarray] = []
-        self.a_slot = -np.ones(n, np.int64)
-        self.a_col = np.zeros(n, np.int64)
-        self.b_slot = -np.ones(n, np.int64)
-        self.b_col = np.zeros(n, np.int64)
-        sides = ((contacts.alpha, contacts.local_alpha, self.a_slot, self.a_col),
-                 (contacts.beta, contacts.local_beta, self.b_slot, self.b_col))
-        body_ids = sorted({int(b) for b in np.r_[contacts.alpha, contacts.beta]
-                           if int(b) in steps})
-        for slot, body in enumerate(body_ids):
-            row_of = steps[body].active_row
-            mine = [(which, c) for which, (bodies, *_rest) in enumerate(sides)
-                    for c in np.flatnonzero(bodies == body)]
-            rows = np.unique([row_of[sides[w][1][c]] for w, c in mine])
-            for w, c in mine:
-                _, local, slots, cols = sides[w]
-                slots[c] = slot
-                cols[c] = np.searchsorted(rows, row_of[local[c]])
-            self.bodies.append(body)
-            self.rows.append(rows)
-        self.k_size = np.array([r.size for r in self.rows], np.int64)
-        self.k_off = np.r_[0, np.cumsum(self.k_size)][:-1].astype(np.int64)
-        self.response: list[np.ndarray | None] = [None] * len(body_ids)
-        self.W: list[np.ndarray | None] = [None] * len(body_ids)
-
-    def span(self, slot: int) -> slice:
-        """Body ``slot``'s rows in the arrays over all contact rows (V, Q)."""
-        return slice(self.k_off[slot], self.k_off[slot] + self.k_size[slot])
-
-    def stack(self, value: Callable) -> np.ndarray:
-        """value(body, its contact rows) of every body in contact, stacked in slot order:
-        an array over all contact rows (e.g. their velocities V)."""
-        return np.concatenate([value(body, rows)
-                               for body, rows in zip(self.bodies, self.rows, strict=True)])
+                    site.tolist(), strict=True))
 
 
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls: dict,
@@ -185,8 +142,22 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             s = steps.get(int(bodies[c]))
             if s is not None and s.active_row[local[c]] < 0:
                 usable[c] = False
-    contacts = _subset(contacts, usable)
-    n, d = len(contacts), lattice.dim
+    contacts = subset(contacts, usable)
+    d = lattice.dim
+    gaps = np.zeros(len(contacts))
+    stencils = None
+    if gap_points is not None and len(contacts):
+        X = node_position(lattice, contacts.node)
+        near = near_points(contacts, X, gap_points, reach)
+        at_wall = np.isin(contacts.alpha, list(walls)) | np.isin(contacts.beta, list(walls))
+        contacts = replace(contacts, normal=oriented_normals(contacts, X, gap_points, near,
+                                                             at_wall))
+        gaps = boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies, near)
+        if settings.grain_sites == "surface" or settings.wall_sites == "surface":
+            contacts, gaps, stencils = surface_sites(
+                lattice, steps, walls if settings.wall_sites == "surface" else {}, contacts,
+                gaps, spacing, reach, round_bodies, settings.grain_sites == "surface")
+    n = len(contacts)
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)
     diag = ContactDiagnostics(n_contacts=n)
@@ -194,16 +165,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         for s in steps.values():
             s.solve()
         return ContactState(contacts, P, status, np.zeros(0)), diag
-    gaps = np.zeros(n)
-    if gap_points is not None:
-        X = node_position(lattice, contacts.node)
-        near = near_points(contacts, X, gap_points, reach)
-        at_wall = np.isin(contacts.alpha, list(walls)) | np.isin(contacts.beta, list(walls))
-        contacts = replace(contacts, normal=oriented_normals(contacts, X, gap_points, near,
-                                                             at_wall))
-        gaps = boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies, near)
     mu = np.asarray(friction(contacts.alpha, contacts.beta), float)
-    slots = _Slots(steps, contacts)
+    slots = Slots(steps, contacts, stencils)
     wall_va = np.zeros((n, d))
     wall_vb = np.zeros((n, d))
     for c in range(n):
@@ -245,7 +208,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         Q = row_impulses(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off,
                          P, k_total)
         for slot, body in enumerate(slots.bodies):
-            steps[body].add_impulses(slots.rows[slot], Q[slots.span(slot)])
+            steps[body].add_impulses(slots.rows[slot], slots.to_rows(slot, Q[slots.span(slot)]))
 
     delassus = settings.relation == "delassus"
     options = ContactSolverOptions(method=settings.solver,
@@ -260,8 +223,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
               for i, b in steps.items() if not done[i]}
         for slot, body in enumerate(slots.bodies):
             if slots.W[slot] is None or (delassus and body in du):
-                slots.response[slot], slots.W[slot] = steps[body].contact_response(
+                slots.response[slot], W_rows = steps[body].contact_response(
                     slots.rows[slot], delassus)
+                slots.W[slot] = slots.compliance(slot, W_rows)
         # the contact rows' velocities at the end of that Newton step (linear prediction)
         V = slots.stack(lambda body, rows, du=du: _predicted_velocity(steps[body], rows,
                                                                       du.get(body)))
@@ -283,7 +247,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # du + X ΔQ = −A⁻¹ R(u; P_new), taken with the line search
         change = problem.row_impulses(result.impulse - P)
         for slot, body in enumerate(slots.bodies):
-            q = change[slots.span(slot)]
+            q = slots.to_rows(slot, change[slots.span(slot)])
             if not np.any(q):
                 continue
             s, rows = steps[body], slots.rows[slot]
@@ -341,7 +305,7 @@ def _predicted_velocity(step, rows: np.ndarray, du: np.ndarray | None) -> np.nda
     return v if du is None else v + step.velocity_affine()[0] * du[rows]
 
 
-def _contact_work(steps: dict, slots: _Slots, P: np.ndarray, wall_va: np.ndarray,
+def _contact_work(steps: dict, slots: Slots, P: np.ndarray, wall_va: np.ndarray,
                   wall_vb: np.ndarray, dt: float) -> tuple[float, float]:
     """The step's wall work and contact dissipation from the contact forces P/Δt and the
     displacements u of the step (the bodies' at their contact rows, Δt v for a wall):
@@ -364,7 +328,7 @@ def _velocity_weight(settings) -> float:
     return settings.beta / settings.gamma if settings.kind == "newmark" else settings.theta
 
 
-def _problem(slots: _Slots, contacts: ContactNodes, wall_va: np.ndarray, wall_vb: np.ndarray,
+def _problem(slots: Slots, contacts: ContactNodes, wall_va: np.ndarray, wall_vb: np.ndarray,
              bias: np.ndarray, mu: np.ndarray, V: np.ndarray, P: np.ndarray) -> ContactProblem:
     """The contact problem at the bodies' current iterate: their row velocities V with the
     impulses P (already in them) removed, V^free = V − W Q(P)."""

@@ -34,7 +34,9 @@ def contact_records(model, contacts, dt: float) -> dict[str, np.ndarray]:
         ft = force[:, 1] * normal[:, 0] - force[:, 0] * normal[:, 1]
     else:
         ft = np.linalg.norm(force - fn[:, None] * normal, axis=1)
-    return {"position": node_position(model.lattice, nodes.node[keep]), "normal": normal,
+    position = (node_position(model.lattice, nodes.node[keep]) if nodes.position is None
+                else nodes.position[keep])
+    return {"position": position, "normal": normal,
             "force": force, "fn": fn, "ft": ft,
             "status": contacts.status[keep].astype(np.int32),
             "alpha": nodes.alpha[keep].astype(np.int32),

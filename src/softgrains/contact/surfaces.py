@@ -1,0 +1,406 @@
+"""Point-to-surface contact between two deformable grains (issue #11, ``grain_sites =
+"surface"``).
+
+Each deformable body T gets a smooth boundary from its points: the ½ level of its
+kernel-smoothed volume fraction
+    c(x) = Σ_{q∈T} V_q W(x − x_q)       (W: Wendland C², radius R = 1.5 h, ∫W = 1),
+which depends only on where T's points are (not on the grid: a rigid motion moves it
+rigidly) and has no lattice staircase. Its outward normal is n_T = −∇c/‖∇c‖ and the signed
+distance to it (> 0 outside) is read through the profile of a flat boundary, c = F(s/R):
+    d_T(x) = −R F⁻¹(c(x))        (exact across a flat boundary, within 0.04 h over ±0.5 h
+                                  for lattice points; −(c − ½)/‖∇c‖ errs by 0.4 h at 0.5 h).
+
+A contact is taken at every point p of the outer layer of a grain O (d_O(x_p) > −δ, δ the
+point spacing) that lies within T's kernel reach, for both orders of a pair (two passes).
+Its gap is the distance from T's surface to the edge of p's deformed cell, per unit of its
+rate,
+    g_p = (d_T(x_p) − e_p)/λ,   e_p = ½δ Σ_j |(F_pᵀ n_T)_j|   (½δ ‖F_pᵀ n_T‖ for ring cells),
+    λ = ‖∇d_T‖ = R ‖∇c‖/F'(F⁻¹(c))  (1 across a flat boundary),
+and its normal rate is taken exactly from both bodies' nodal velocities:
+    ġ_p λ⁻¹ = n_T·v_O(x_p) − (1/‖∇c‖) ∂c/∂t(x_p),     ∂c/∂t(x) = Σ_J a_J·v_J,
+    a_J = Σ_q V_q [−∇W(x − x_q) N_J(x_q) + W(x − x_q) ∇N_J(x_q)]
+(T's points moving with ẋ_q = Σ_J N_J(x_q) v_J, their volumes with V̇_q = V_q ∇·v;
+Σ_J a_J = −∇c, so momentum is exchanged exactly). The own side's velocity is the point's own
+interpolation v_O(x_p) = Σ_I N_I(x_p) v_I (what moves p); the surface side's, along n_T, is
+the motion of T's smoothed surface above and, across n_T (friction), T's velocity field at
+x_p. Taking the surface's normal velocity from where T's points are — not T's velocity
+field at x_p, a point outside T — is what keeps the constraint tight while T deforms: with
+the sampled velocity the gap fell up to 0.13 h a step below its prediction at an impact
+(session 11, docs/dev-notes.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from numba import njit
+from scipy.spatial import cKDTree
+
+from softgrains.geometry import Disk, Rectangle
+from softgrains.grid.shape_functions import compute_stencils, stencil_width
+
+FIELD_FLOOR = 1e-9  # a smoothed volume fraction below this does not reach the point
+
+
+@dataclass(frozen=True)
+class SurfaceContacts:
+    """Point contacts of one step: per contact the body pair, the point's body and index,
+    its position, gap and normal (from β into α), each side's sampled stencil (active rows,
+    −1: none, and weights) and the surface side's exact normal velocity Σ_J b_J·v_J (rows,
+    vectors b_J = a_J/‖∇c‖) along its outward normal n_T."""
+
+    alpha: np.ndarray
+    beta: np.ndarray
+    owner_is_alpha: np.ndarray  # the point belongs to α (first pass) or to β (second)
+    point: np.ndarray  # the point's index within its own body
+    position: np.ndarray  # (n, d)
+    gap: np.ndarray
+    normal: np.ndarray
+    rows_alpha: np.ndarray  # (n, s^d)
+    weights_alpha: np.ndarray
+    rows_beta: np.ndarray
+    weights_beta: np.ndarray
+    rate_rows: np.ndarray  # (n, r)
+    rate_vec: np.ndarray  # (n, r, d)
+    rate_normal: np.ndarray  # (n, d)
+
+    def __len__(self) -> int:
+        return self.gap.size
+
+
+KERNEL_RADIUS = 1.5  # support radius of the smoothing kernel, in cells h
+
+
+@njit(cache=True, inline="always")
+def _wendland(r, radius, d):
+    """Wendland C² kernel W(r) with support ``radius`` (∫W = 1 in d = 2 or 3) and
+    W'(r)/r (for ∇W = W'(r)/r · (x − x_q))."""
+    q = r / radius
+    if q >= 1.0:
+        return 0.0, 0.0
+    norm = 7.0 / (np.pi * radius**2) if d == 2 else 21.0 / (2.0 * np.pi * radius**3)
+    w = norm * (1.0 - q) ** 4 * (1.0 + 4.0 * q)
+    dw_over_r = norm * (-20.0) * (1.0 - q) ** 3 / radius**2
+    return w, dw_over_r
+
+
+@njit(cache=True, inline="always")
+def _kernel_between(x, p, xq, q, radius):
+    """W and W'(r)/r between query point x[p] and body point xq[q]."""
+    r2 = 0.0
+    for j in range(x.shape[1]):
+        r2 += (x[p, j] - xq[q, j]) ** 2
+    return _wendland(np.sqrt(r2), radius, x.shape[1])
+
+
+@njit(cache=True)
+def _kernel_field(x, ptr, neighbours, xq, vol, radius, value, grad):
+    """c(x) = Σ_q V_q W(x − x_q) and ∇c at each query point (neighbours in CSR form)."""
+    m, d = x.shape
+    for p in range(m):
+        value[p] = 0.0
+        for j in range(d):
+            grad[p, j] = 0.0
+        for e in range(ptr[p], ptr[p + 1]):
+            q = neighbours[e]
+            w, dw = _kernel_between(x, p, xq, q, radius)
+            value[p] += vol[q] * w
+            for j in range(d):
+                grad[p, j] += vol[q] * dw * (x[p, j] - xq[q, j])
+
+
+@njit(cache=True)
+def _kernel_rate(x, ptr, neighbours, xq, vol, radius, nodes, N, dN, active_row, out_rows,
+                 out_vec):
+    """a_J with ∂c(x)/∂t = Σ_J a_J·v_J for c = Σ_q V_q W(x − x_q), points moving with
+    ẋ_q = Σ_J N_J(x_q) v_J and volumes with V̇_q = V_q ∇·v:
+        a_J = Σ_q V_q [−∇W(x − x_q) N_J(x_q) + W(x − x_q) ∇N_J(x_q)]
+    (Σ_J a_J = −∇c: a rigid translation moves c rigidly)."""
+    m, d = x.shape
+    ns = N.shape[1]
+    n_rows = 0
+    for i in range(active_row.size):
+        n_rows = max(n_rows, active_row[i] + 1)
+    acc = np.zeros((n_rows, d))
+    mark = -np.ones(n_rows, np.int64)
+    width = out_rows.shape[1]
+    touched = np.empty(width, np.int64)
+    for p in range(m):
+        count = 0
+        for e in range(ptr[p], ptr[p + 1]):
+            q = neighbours[e]
+            w, dw = _kernel_between(x, p, xq, q, radius)
+            if w == 0.0:
+                continue
+            for kk in range(ns):
+                J = active_row[nodes[q, kk]]
+                if J < 0:
+                    continue
+                if mark[J] != p:
+                    if count == width:
+                        continue  # (never: width bounds the nodes a kernel can reach)
+                    mark[J] = p
+                    for j in range(d):
+                        acc[J, j] = 0.0
+                    touched[count] = J
+                    count += 1
+                for j in range(d):
+                    acc[J, j] += vol[q] * (-dw * (x[p, j] - xq[q, j]) * N[q, kk]
+                                           + w * dN[q, kk, j])
+        for t in range(width):
+            if t < count:
+                out_rows[p, t] = touched[t]
+                for j in range(d):
+                    out_vec[p, t, j] = acc[touched[t], j]
+            else:
+                out_rows[p, t] = -1
+                for j in range(d):
+                    out_vec[p, t, j] = 0.0
+
+
+def _wendland_profile(d: int, samples: int = 801) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The volume fraction across a flat boundary smoothed by the unit-radius kernel:
+    ξ (signed distance into the body, in kernel radii), F(ξ) = ∫_{−1}^{ξ} W₁ and its
+    derivative W₁, the kernel's marginal along the normal (numerical quadrature)."""
+    xi = np.linspace(-1.0, 1.0, samples)
+    t = np.linspace(0.0, 1.0, 2001)
+    r = np.sqrt(xi[:, None] ** 2 + t[None, :] ** 2)
+    q = np.minimum(r, 1.0)
+    w = (1.0 - q) ** 4 * (1.0 + 4.0 * q) * (r < 1.0)
+    if d == 2:
+        marginal = 2.0 * np.trapezoid(w, t, axis=1) * 7.0 / np.pi
+    else:
+        marginal = np.trapezoid(w * 2.0 * np.pi * t, t, axis=1) * 21.0 / (2.0 * np.pi)
+    F = np.concatenate([[0.0], np.cumsum(0.5 * (marginal[1:] + marginal[:-1])
+                                         * np.diff(xi))])
+    F /= F[-1]
+    return xi, F, marginal / np.trapezoid(marginal, xi)
+
+
+PROFILES = {d: _wendland_profile(d) for d in (2, 3)}
+
+
+def calibrated_distance(value: np.ndarray, grad: np.ndarray, radius: float
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """Signed distance to the ½ level (> 0 outside) from the smoothed volume fraction c,
+    exact for a flat boundary: d = −R F⁻¹(c), F the profile of :func:`_wendland_profile`;
+    and λ = ‖∇d‖ = R‖∇c‖/F'(F⁻¹(c)) (1 across a flat boundary), so that ḋ = λ (n·ẋ − ∂c/∂t
+    /‖∇c‖). Where c is 0 (beyond the kernel's reach) d is +inf."""
+    xi, F, f = PROFILES[grad.shape[1]]
+    c = np.clip(value, F[1], F[-2])
+    inside = np.interp(c, F, xi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = radius * np.linalg.norm(grad, axis=1) / np.interp(inside, xi, f)
+    return np.where(value > 0.0, -radius * inside, np.inf), lam
+
+
+def _neighbours(tree, x: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points of a body within ``radius`` of each x, in CSR form."""
+    found = tree.query_ball_point(x, radius, return_sorted=False)
+    counts = np.fromiter((len(f) for f in found), np.int64, count=len(found))
+    ptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
+    flat = np.fromiter((i for f in found for i in f), np.int64, count=int(ptr[-1]))
+    return ptr, flat
+
+
+class KernelSurface:
+    """A deformable body's smoothed volume fraction c(x) = Σ_q V_q W(x − x_q) from its
+    points at the start of the step (its BodyStep), and c's rate in its nodal velocities."""
+
+    def __init__(self, step) -> None:
+        self.step = step
+        self.radius = KERNEL_RADIUS * step.stepper.lattice.h
+        self.tree = cKDTree(step.pts.x)
+
+    def field(self, x: np.ndarray):
+        """c and ∇c at x, and the neighbour lists (CSR) they were summed over."""
+        ptr, nb = _neighbours(self.tree, x, self.radius)
+        value, grad = np.empty(len(x)), np.empty(x.shape)
+        _kernel_field(x, ptr, nb, self.step.pts.x, self.step.pts.vol, self.radius, value, grad)
+        return value, grad, (ptr, nb)
+
+    def rate(self, x: np.ndarray, near) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, a): ∂c/∂t(x) = Σ_k a_k·v_{rows_k} (rows −1: unused)."""
+        step = self.step
+        d = x.shape[1]
+        s = int(round(step.N.shape[1] ** (1.0 / d)))
+        width = (int(np.ceil(2 * KERNEL_RADIUS)) + s + 1) ** d
+        out_rows = np.empty((len(x), width), np.int64)
+        out_vec = np.empty((len(x), width, d))
+        _kernel_rate(x, near[0], near[1], step.pts.x, step.pts.vol, self.radius, step.nodes,
+                     step.N, step.dN, step.active_row, out_rows, out_vec)
+        return out_rows, out_vec
+
+    def velocity_stencil(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The body's velocity field at x: active rows and weights N_I(x) renormalised over
+        them (all zero where no active node is reached)."""
+        step = self.step
+        lattice, kind = step.stepper.lattice, step.stepper.shape_kind
+        n, d = x.shape
+        s = stencil_width(kind)
+        base = np.empty((n, d), np.int64)
+        N = np.empty((n, s**d))
+        compute_stencils(x, lattice.node_origin, lattice.h, kind, base, N, np.empty((n, s**d, d)))
+        rows, weights = np.empty((n, s**d), np.int64), np.empty((n, s**d))
+        _stencil_rows(base, N, step.box.lower, step.box.shape, step.active_row, rows, weights)
+        return rows, weights
+
+
+@njit(cache=True)
+def _stencil_rows(base, N, lower, shape, active_row, rows, weights):
+    """Each stencil entry's active row in the body's box (−1: outside or inactive) and the
+    weights renormalised over the active entries."""
+    n, ns = N.shape
+    d = base.shape[1]
+    s = int(round(ns ** (1.0 / d)))
+    for p in range(n):
+        total = 0.0
+        for k in range(ns):
+            rem, local, stride, inside = k, 0, 1, True
+            for j in range(d):
+                i = base[p, j] + rem % s - lower[j]
+                rem //= s
+                inside = inside and 0 <= i < shape[j]
+                local += i * stride
+                stride *= shape[j]
+            rows[p, k] = active_row[local] if inside else -1
+            weights[p, k] = N[p, k] if rows[p, k] >= 0 else 0.0
+            total += weights[p, k]
+        for k in range(ns):
+            weights[p, k] = weights[p, k] / total if total > 0.0 else 0.0
+
+
+def cell_extent(F: np.ndarray, n: np.ndarray, spacing: float, round_body: bool) -> np.ndarray:
+    """Half-extent along n of each point's deformed cell, edges F δ e_j:
+    e = ½δ Σ_j |(Fᵀn)_j| (lattice squares); ½δ ‖Fᵀn‖ for ring cells (one edge along the
+    radius, taken along n)."""
+    FTn = np.einsum("pji,pj->pi", F, np.nan_to_num(n))
+    return 0.5 * spacing * (np.linalg.norm(FTn, axis=1) if round_body
+                            else np.abs(FTn).sum(axis=1))
+
+
+def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float,
+          round_body: bool):
+    """Body ``own``'s outer points against ``other``'s surface T: their indices, gaps,
+    T's outward normals, the own stencils (what moves each point), T's sampled stencils and
+    T's exact normal velocity (rows, vectors, normal)."""
+    O, T = surfaces[own], surfaces[other]
+    x = O.step.pts.x
+    lo, hi = T.step.pts.x.min(axis=0), T.step.pts.x.max(axis=0)
+    margin = reach + T.radius
+    near_box = np.flatnonzero(np.all((x > lo - margin) & (x < hi + margin), axis=1))
+    value, grad, _ = O.field(x[near_box])
+    own_distance, _ = calibrated_distance(value, grad, O.radius)
+    candidates = near_box[own_distance > -spacing]  # the outer layer of own's points
+    xc = x[candidates]
+    c, grad, near = T.field(xc)
+    length = np.linalg.norm(grad, axis=1)
+    distance, lam = calibrated_distance(c, grad, T.radius)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n_out = -grad / length[:, None]
+        # the distance to T's surface less the point's half cell, per unit of its rate
+        # n·(v_O − v_T): g/λ
+        gap = (distance - cell_extent(O.step.pts.F[candidates], n_out, spacing,
+                                      round_body)) / lam
+    rows, weights = T.velocity_stencil(xc)
+    reached = ((c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap) & (gap < reach)
+               & (weights.sum(axis=1) > 0.5))
+    keep, which = candidates[reached], np.flatnonzero(reached)
+    n_out = n_out[reached]
+    counts = np.diff(near[0])
+    sub_ptr = np.r_[0, np.cumsum(counts[which])].astype(np.int64)
+    sub_nb = near[1][np.repeat(reached, counts)]  # the neighbour lists of the kept points
+    rate_rows, rate_vec = T.rate(xc[reached], (sub_ptr, sub_nb))
+    rate_vec /= length[reached][:, None, None]
+    own_rows = O.step.active_row[O.step.nodes[keep]]
+    return (keep, gap[reached], n_out, (own_rows, O.step.N[keep]),
+            (rows[reached], weights[reached]), (rate_rows, rate_vec, n_out))
+
+
+def shape_distance(shape, x: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Exact signed distance (> 0 outside) and outward unit normal of a kinematic body's
+    rectangle or disk at x (None for other shapes)."""
+    if isinstance(shape, Rectangle):
+        lo, hi = np.asarray(shape.lower, float), np.asarray(shape.upper, float)
+        centre, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+        r = x - centre
+        q = np.abs(r) - half  # per axis: distance out of the slab (< 0 inside)
+        out = np.maximum(q, 0.0)
+        outside = np.linalg.norm(out, axis=1)
+        axis = np.argmax(q, axis=1)
+        inside = np.minimum(q[np.arange(len(x)), axis], 0.0)
+        normal = np.where(outside[:, None] > 0.0,
+                          np.sign(r) * out / np.maximum(outside, 1e-300)[:, None],
+                          np.sign(r) * (np.arange(x.shape[1]) == axis[:, None]))
+        return outside + inside, normal
+    if isinstance(shape, Disk):
+        r = x - np.asarray(shape.center, float)
+        length = np.linalg.norm(r, axis=1)
+        return length - shape.radius, r / np.maximum(length, 1e-300)[:, None]
+    return None
+
+
+def wall_contacts(pairs: list[tuple[int, int]], steps: dict, shapes: dict, spacing: float,
+                  reach: float, round_bodies=frozenset()) -> SurfaceContacts:
+    """Every (grain, wall) pair: the grain's outer points against the kinematic wall's exact
+    surface (gap d_wall(x_p) − e_p, normal the wall's outward normal, the wall's velocity
+    prescribed). The grain is α, the wall β."""
+    parts = []
+    for grain, wall in pairs:
+        O = KernelSurface(steps[grain])
+        x = O.step.pts.x
+        distance, n_out = shape_distance(shapes[wall], x)
+        near = np.flatnonzero(distance < reach + spacing)
+        value, grad, _ = O.field(x[near])
+        own_distance, _ = calibrated_distance(value, grad, O.radius)
+        keep = near[own_distance > -spacing]
+        gap = distance[keep] - cell_extent(O.step.pts.F[keep], n_out[keep], spacing,
+                                           grain in round_bodies)
+        keep, gap = keep[gap < reach], gap[gap < reach]
+        n, d = keep.size, x.shape[1]
+        width = O.step.N.shape[1]
+        none = -np.ones((n, width), np.int64)
+        parts.append((np.full(n, grain), np.full(n, wall), np.ones(n, bool), keep, x[keep],
+                      gap, n_out[keep], O.step.active_row[O.step.nodes[keep]],
+                      O.step.N[keep], none, np.zeros((n, width)),
+                      -np.ones((n, 0), np.int64), np.zeros((n, 0, d)), n_out[keep]))
+    return _concatenate(parts)
+
+
+def merge(found: list[SurfaceContacts]) -> SurfaceContacts:
+    """Several SurfaceContacts in one."""
+    return _concatenate([tuple(getattr(sc, f.name) for f in fields(sc)) for sc in found])
+
+
+def _concatenate(parts: list[tuple]) -> SurfaceContacts:
+    """The contacts of several passes in one SurfaceContacts (rate arrays padded to the
+    widest)."""
+    width = max(part[11].shape[1] for part in parts)
+    padded = []
+    for part in parts:
+        rows, vec = part[11], part[12]
+        extra = width - rows.shape[1]
+        padded.append(part[:11] + (np.pad(rows, ((0, 0), (0, extra)), constant_values=-1),
+                                   np.pad(vec, ((0, 0), (0, extra), (0, 0))), part[13]))
+    return SurfaceContacts(*(np.concatenate([p[i] for p in padded]) for i in range(14)))
+
+
+def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,
+                     reach: float, round_bodies=frozenset()) -> SurfaceContacts:
+    """Both passes for every pair (α, β) of deformable bodies, α < β."""
+    surfaces = {b: KernelSurface(steps[b]) for pair in pairs for b in pair}
+    parts = []
+    for a, b in pairs:
+        for own, other in ((a, b), (b, a)):
+            idx, gap, n_out, own_st, other_st, rate = _pass(own, other, surfaces, spacing,
+                                                            reach, own in round_bodies)
+            own_alpha = own == a
+            # normal from β into α: out of β's surface in the first pass, into α's in the
+            # second
+            normal = n_out if own_alpha else -n_out
+            st_a, st_b = (own_st, other_st) if own_alpha else (other_st, own_st)
+            parts.append((np.full(idx.size, a), np.full(idx.size, b),
+                          np.full(idx.size, own_alpha), idx, steps[own].pts.x[idx], gap,
+                          normal, st_a[0], st_a[1], st_b[0], st_b[1], *rate))
+    return _concatenate(parts)
