@@ -52,7 +52,7 @@ def stacked(shape: str, dh: int, seeding: str, overrides: list[str]) -> None:
         for points, side in ((lower, 1.0), (upper, -1.0)):
             column = np.abs(x[points, 0] - 0.5) <= 0.75 * delta
             y = x[points][column, 1]
-            extent = 0.5 * delta * np.abs(F[points][column][:, :, 1]).sum(axis=1)
+            extent = 0.5 * delta * np.abs(F[points][column][:, 1, :]).sum(axis=1)
             ends.append(((y + side * 0.5 * delta), (y + side * extent)))
         plain = (ends[1][0].min() - ends[0][0].max()) / h
         deformed = (ends[1][1].min() - ends[0][1].max()) / h

@@ -196,7 +196,7 @@ def _column_gap(sim, delta):
         points = sim.model.bodies[body].points
         column = np.abs(x[points, 0] - 0.5) <= 0.75 * delta
         y = x[points][column, 1]
-        extent = 0.5 * delta * np.abs(F[points][column][:, :, 1]).sum(axis=1)
+        extent = 0.5 * delta * np.abs(F[points][column][:, 1, :]).sum(axis=1)
         ends.append((y + side * 0.5 * delta, y + side * extent))
     return ends[1][0].min() - ends[0][0].max(), ends[1][1].min() - ends[0][1].max()
 
@@ -206,10 +206,11 @@ def _column_gap(sim, delta):
 def test_stacked_disks_meet_within_the_bar_with_surface_contacts(d_over_h, seeding,
                                                                  shape_function):
     """Issue #11 item 2 (0.05 h), grain on grain: with point-to-surface contacts
-    (contact/surfaces.py) the two stacked disks' boundaries meet within 0.05 h and stay
-    there while the disks rest, where the nodal contacts let them into each other (D/h 20
-    rings, B-splines: −0.16 h after 1.5 s; D/h 10: −0.12 h). Measured (2026-12-02, 1.5 s):
-    −0.022 / −0.022 / −0.019 h (deformed cells −0.012 / −0.017 / −0.009 h)."""
+    (contact/surfaces.py) the two stacked disks' boundaries meet within 0.05 h after the
+    drop and settling (0.8 s), where the nodal contacts let them into each other (D/h 20
+    rings, B-splines: −0.16 h; D/h 10: −0.12 h). Measured (2026-12-02, with
+    benchmarks/contact_leak.py to 1.5 s, where they stay): −0.022 / −0.022 / −0.019 h
+    (deformed cells −0.012 / −0.017 / −0.009 h)."""
     h = 0.4 / d_over_h
     delta = h / 2
     sim = _two_disks_stacked(h, seeding, grain_sites="surface", shape_function=shape_function)

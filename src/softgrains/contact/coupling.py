@@ -1,14 +1,16 @@
 """Contact and bulk together: the coupled loop of ALGORITHM.md §6, each iteration a Newton
 step of the bodies with a complete solve of the contact problem.
 
-    set up every deformable body's step; find the contact nodes, normals and gaps; the gap
+    set up every deformable body's step; find the contact nodes, normals and gaps (between
+        two grains, by default, point-to-surface contacts instead: surfaces.py, sites.py;
+        the problem is posed on contact sites, nodes or points); the gap
         bias b = (g + (1 − θ)Δt w_n^n)/(θΔt) keeps the end-of-step gap of the integrator's
         own displacement ≥ 0 (overlaps clipped or partly removed, gap.py); a contact loaded
         at the previous step starts closed, g = min(estimate, 0) (keep_closed)
-    warm start: the impulses of the previous step at the same (node, α, β) enter b
+    warm start: the impulses of the previous step at the same (node, α, β, site) enter b
     repeat (iteration k):
         every body not converged: its Newton direction du = −A⁻¹ R(u; P) (A factorised)
-        each body in contact: its compliance W at its contact rows
+        each body in contact: its compliance W at its contact sites (H W Hᵀ)
             Delassus: κ w [A⁻¹]_cc from that factorization;  lumped: diag(1/m)
         the contact problem (problem.py) on the rows' velocities predicted at u + du,
             solved completely (solvers.py: semismooth Newton by default)
@@ -104,7 +106,7 @@ class ContactState:
     status: np.ndarray  # OPEN / STICK / SLIP
     gap: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
-    def keys(self) -> list[tuple[int, int, int]]:
+    def keys(self) -> list[tuple[int, int, int, int]]:
         return _keys(self.nodes)
 
 
@@ -275,14 +277,16 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         c = int(np.argmax(phi))
         a, b = int(contacts.alpha[c]), int(contacts.beta[c])
         name_a, name_b = (names[a], names[b]) if names is not None else (a, b)
-        where = ", ".join(f"{x:.6g}" for x in node_position(lattice, contacts.node[c:c + 1])[0])
+        at = (node_position(lattice, contacts.node[c:c + 1])[0] if contacts.position is None
+              else contacts.position[c])
+        where = ", ".join(f"{x:.6g}" for x in at)
         bodies_left = [steps[i].stepper.name for i, ok in done.items() if not ok]
         diag.message = (
             f"step {step}: the contact loop did not converge in {settings.max_iterations} "
             f"iterations (complementarity residual {diag.residual:.2e} of the largest "
             f"impulse, tolerance {settings.tolerance:g}; {settings.relation} relation, "
             f"{settings.solver} contact solver; largest error between bodies '{name_a}' and "
-            f"'{name_b}' at the node at ({where})"
+            f"'{name_b}' at ({where})"
             + (f"; bodies whose Newton residual is above its tolerance: "
                f"{', '.join(bodies_left[:5])}" if bodies_left else "")
             + "); try a smaller dt, more contact max_iterations"

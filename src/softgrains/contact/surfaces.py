@@ -40,6 +40,7 @@ from scipy.spatial import cKDTree
 from softgrains.geometry import Disk, Rectangle
 from softgrains.grid.shape_functions import compute_stencils, stencil_width
 
+_trapezoid = getattr(np, "trapezoid", None) or np.trapz  # NumPy ≥ 2 / 1.26
 FIELD_FLOOR = 1e-9  # a smoothed volume fraction below this does not reach the point
 
 
@@ -169,13 +170,13 @@ def _wendland_profile(d: int, samples: int = 801) -> tuple[np.ndarray, np.ndarra
     q = np.minimum(r, 1.0)
     w = (1.0 - q) ** 4 * (1.0 + 4.0 * q) * (r < 1.0)
     if d == 2:
-        marginal = 2.0 * np.trapezoid(w, t, axis=1) * 7.0 / np.pi
+        marginal = 2.0 * _trapezoid(w, t, axis=1) * 7.0 / np.pi
     else:
-        marginal = np.trapezoid(w * 2.0 * np.pi * t, t, axis=1) * 21.0 / (2.0 * np.pi)
+        marginal = _trapezoid(w * 2.0 * np.pi * t, t, axis=1) * 21.0 / (2.0 * np.pi)
     F = np.concatenate([[0.0], np.cumsum(0.5 * (marginal[1:] + marginal[:-1])
                                          * np.diff(xi))])
     F /= F[-1]
-    return xi, F, marginal / np.trapezoid(marginal, xi)
+    return xi, F, marginal / _trapezoid(marginal, xi)
 
 
 PROFILES = {d: _wendland_profile(d) for d in (2, 3)}
@@ -284,7 +285,9 @@ def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float,
           round_body: bool):
     """Body ``own``'s outer points against ``other``'s surface T: their indices, gaps,
     T's outward normals, the own stencils (what moves each point), T's sampled stencils and
-    T's exact normal velocity (rows, vectors, normal)."""
+    T's exact normal velocity (rows, vectors, normal). A point is seen only within T's
+    kernel reach (c > 0: about 1.25 h outside T's surface) and where T has an active node
+    in its stencil: two grains closing faster than ~1 h a step meet one step late."""
     O, T = surfaces[own], surfaces[other]
     x = O.step.pts.x
     lo, hi = T.step.pts.x.min(axis=0), T.step.pts.x.max(axis=0)
