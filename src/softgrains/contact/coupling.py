@@ -50,7 +50,7 @@ from softgrains.contact.problem import (
     residual_norm,
     row_impulses,
 )
-from softgrains.contact.sites import Slots, subset, surface_sites
+from softgrains.contact.sites import Slots, point_contacts, subset, with_point_contacts
 from softgrains.contact.solvers import ContactSolverOptions, solve
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
@@ -147,7 +147,14 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     contacts = subset(contacts, usable)
     d = lattice.dim
     gaps = np.zeros(len(contacts))
-    stencils = None
+    stencils, points = None, None
+    if gap_points is not None and len(contacts) and "surface" in (settings.grain_sites,
+                                                                  settings.wall_sites):
+        # the pairs taken at points leave the nodal set before its gaps are estimated
+        contacts, points = point_contacts(
+            lattice, steps, walls if settings.wall_sites == "surface" else {}, contacts,
+            spacing, reach, round_bodies, settings.grain_sites == "surface")
+        gaps = np.zeros(len(contacts))
     if gap_points is not None and len(contacts):
         X = node_position(lattice, contacts.node)
         near = near_points(contacts, X, gap_points, reach)
@@ -155,10 +162,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         contacts = replace(contacts, normal=oriented_normals(contacts, X, gap_points, near,
                                                              at_wall))
         gaps = boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies, near)
-        if settings.grain_sites == "surface" or settings.wall_sites == "surface":
-            contacts, gaps, stencils = surface_sites(
-                lattice, steps, walls if settings.wall_sites == "surface" else {}, contacts,
-                gaps, spacing, reach, round_bodies, settings.grain_sites == "surface")
+    if points is not None:
+        contacts, gaps, stencils = with_point_contacts(lattice, steps, contacts, gaps, points)
     n = len(contacts)
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)

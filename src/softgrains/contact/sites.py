@@ -17,7 +17,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from softgrains.contact.detection import ContactNodes, node_position
-from softgrains.contact.surfaces import merge, shape_distance, surface_contacts, wall_contacts
+from softgrains.contact.surfaces import (
+    SurfaceContacts,
+    merge,
+    shape_distance,
+    surface_contacts,
+    wall_contacts,
+)
 from softgrains.grid.lattice import Lattice
 
 
@@ -179,22 +185,19 @@ def nodal_stencils(steps: dict, contacts: ContactNodes) -> tuple[SideStencils, S
     return out[0], out[1]
 
 
-def surface_sites(lattice: Lattice, steps: dict, walls: dict, contacts: ContactNodes,
-                   gaps: np.ndarray, spacing: float, reach: float, round_bodies=frozenset(),
-                   grains: bool = True
-                   ) -> tuple[ContactNodes, np.ndarray, tuple[SideStencils, SideStencils]]:
-    """Replace the nodal contacts of every pair of deformable grains (``grains``), and of
-    every grain and rectangular or round wall in ``walls``, by point-to-surface contacts at
-    the grains' outer points (surfaces.py). Returns the contacts, their gaps and both
-    sides' stencils."""
+def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: ContactNodes,
+                   spacing: float, reach: float, round_bodies=frozenset(),
+                   grains: bool = True) -> tuple[ContactNodes, SurfaceContacts | None]:
+    """Split the nodal contacts: those of every pair of deformable grains (``grains``) and of
+    every grain and rectangular or round wall in ``walls`` are replaced by point-to-surface
+    contacts at the grains' outer points (surfaces.py). Returns the nodal contacts left (the
+    caller estimates their gaps) and the point contacts (None: there are none)."""
     grain = np.array([grains and int(a) in steps and int(b) in steps
                       for a, b in zip(contacts.alpha, contacts.beta, strict=True)], bool)
     shapes = {b: shape for b, (_, shape) in walls.items()
               if shape_distance(shape, np.zeros((1, lattice.dim))) is not None}
     wall = np.array([int(a) in steps and int(b) in shapes
                      for a, b in zip(contacts.alpha, contacts.beta, strict=True)], bool)
-    nodal = subset(contacts, ~(grain | wall))
-    nodal_sides = nodal_stencils(steps, nodal)
     pairs = sorted({(int(a), int(b)) for a, b in zip(contacts.alpha[grain],
                                                      contacts.beta[grain], strict=True)})
     wall_pairs = sorted({(int(a), int(b)) for a, b in zip(contacts.alpha[wall],
@@ -202,9 +205,16 @@ def surface_sites(lattice: Lattice, steps: dict, walls: dict, contacts: ContactN
     found = ([surface_contacts(pairs, steps, spacing, reach, round_bodies)] if pairs else []) \
         + ([wall_contacts(wall_pairs, steps, shapes, spacing, reach, round_bodies)]
            if wall_pairs else [])
-    if not found:
-        return nodal, gaps, nodal_sides
-    sc = merge(found)
+    return subset(contacts, ~(grain | wall)), merge(found) if found else None
+
+
+def with_point_contacts(lattice: Lattice, steps: dict, nodal: ContactNodes, gaps: np.ndarray,
+                        sc: SurfaceContacts
+                        ) -> tuple[ContactNodes, np.ndarray, tuple[SideStencils, SideStencils]]:
+    """The nodal contacts (with their ``gaps``) and the point contacts ``sc`` as one set:
+    the contacts, their gaps and both sides' stencils (nodal sides padded to the points'
+    stencil width)."""
+    nodal_sides = nodal_stencils(steps, nodal)
     width = sc.rows_alpha.shape[1]
     d = lattice.dim
     n_codes = max(steps) + 2
@@ -239,4 +249,4 @@ def surface_sites(lattice: Lattice, steps: dict, walls: dict, contacts: ContactN
         np.r_[nodal.local_alpha, none], np.r_[nodal.local_beta, none],
         np.r_[np.full(len(nodal), -1), 2 * sc.point + (~sc.owner_is_alpha)],
         np.r_[node_position(lattice, nodal.node), sc.position])
-    return merged, np.r_[gaps[~(grain | wall)], sc.gap], (sides[0], sides[1])
+    return merged, np.r_[gaps, sc.gap], (sides[0], sides[1])
