@@ -312,7 +312,14 @@ def residual_norm(problem: ContactProblem, P: np.ndarray, w: np.ndarray | None =
         return 0.0
     if w is None:
         w = problem.velocities(P)
-    phi = np.linalg.norm(natural_map_residual(problem, P, w), axis=1)
+    return relative_error(problem, natural_map_residual(problem, P, w), P, w, floor)
+
+
+def relative_error(problem: ContactProblem, phi: np.ndarray, P: np.ndarray, w: np.ndarray,
+                   floor: float = 0.0) -> float:
+    """:func:`residual_norm` of a natural-map residual ``phi`` (n, d) at impulses P and
+    relative velocities w (also for a related law, e.g. Tresca's fixed friction bound)."""
+    phi = np.linalg.norm(phi, axis=1)
     largest = float(np.linalg.norm(P, axis=1).max())
     scale = max(largest, impulse_scale(problem), floor, 1e-300)
     speed = max(float(np.linalg.norm(w, axis=1).max()), velocity_scale(problem))

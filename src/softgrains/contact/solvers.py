@@ -14,16 +14,21 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   backtracking line search on ½‖Φ‖². Its convergence does not depend on the conditioning
   of W (a free grain between walls at Δt c/h ~ 10³ gives cond(W) ~ 10⁶, where Gauss–Seidel
   needs ~10⁶ sweeps); frictionless problems are solved in a finite number of steps (an
-  active-set method). With friction it can stall (no global convergence for the
-  non-associated Coulomb law): then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps continue
-  from its best iterate. Dimension-generic (the 3D cone's projection is exact).
+  active-set method; with redundant contacts — more sites than the velocity modes they
+  sample, W singular — that can take 20–40 iterations whose best residual stalls for ten
+  while the merit still falls: it stops only when ½‖Φ‖² has not fallen by 1% in
+  STAGNATION_ITERATIONS). With friction it can stall or cycle (no global convergence for
+  the non-associated Coulomb law): then the **Tresca fixed point** — the friction bound
+  s = μ P_n held, the Tresca problem (monotone for a symmetric W) solved by the same
+  Newton, s updated — and if that fails too, up to NSGS_FALLBACK_SWEEPS Gauss–Seidel
+  sweeps from the best iterate. Dimension-generic (the 3D cone's projection is exact).
 - ``nsgs``: nonlinear Gauss–Seidel over contacts with the exact local solution
   (gauss_seidel.py).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -34,6 +39,7 @@ from softgrains.contact.local_law import OPEN, SLIP, STICK
 from softgrains.contact.problem import (
     ContactProblem,
     normal_masses,
+    relative_error,
     residual_norm,
     to_global,
     to_local,
@@ -42,7 +48,10 @@ from softgrains.contact.problem import (
 METHODS = ("newton", "nsgs")
 LINE_SEARCH_HALVINGS = 12
 NSGS_FALLBACK_SWEEPS = 500  # Gauss–Seidel sweeps after a Newton solve that did not converge
-STAGNATION_ITERATIONS = 6  # Newton stops when its best residual is this many iterations old
+STAGNATION_ITERATIONS = 30  # Newton stops when its merit has not decreased in this many
+STAGNATION_DECREASE = 0.99  # ... iterations by at least this factor
+TRESCA_ITERATIONS = 30  # friction-bound updates of the Tresca fixed point (a stalled Newton)
+TRESCA_TOLERANCE_FRACTION = 0.1  # each Tresca problem to this fraction of the tolerance
 
 
 @dataclass(frozen=True)
@@ -84,6 +93,10 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     result = _newton(problem, P, options)
     if result.converged:
         return result
+    if np.any(problem.mu > 0.0):
+        result = _tresca_fixed_point(problem, result, options)
+        if result.converged:
+            return result
     # the Alart–Curnier Newton has no global convergence with Coulomb friction (seen
     # stalling at 3e-2 on a frictional compaction step whose problem Gauss–Seidel solves in
     # 540 sweeps); Gauss–Seidel from its best iterate, the better of the two returned
@@ -138,12 +151,16 @@ class _Linearised:
 
 
 def _alart_curnier(r: np.ndarray, u: np.ndarray, bias: np.ndarray, mu: np.ndarray,
-                   rho: np.ndarray, movable: np.ndarray) -> _Linearised:
+                   rho: np.ndarray, movable: np.ndarray,
+                   threshold: np.ndarray | None = None) -> _Linearised:
+    """Φ and G of the Alart–Curnier function; with ``threshold`` (per contact) the Tresca
+    law of that fixed friction bound instead of Coulomb's μ max(0, λ_n)."""
     n, d = r.shape
     lam_n = r[:, 0] - rho * (u[:, 0] + bias)
     lam_t = r[:, 1:] - rho[:, None] * u[:, 1:]
     pressed = (lam_n > 0.0) & movable
-    radius = mu * np.where(pressed, lam_n, 0.0)
+    radius = (mu * np.where(pressed, lam_n, 0.0) if threshold is None
+              else np.where(movable, threshold, 0.0))
     norm_t = np.linalg.norm(lam_t, axis=1)
     inside = (norm_t <= radius) | (norm_t == 0.0)
     safe = np.where(inside, 1.0, norm_t)
@@ -160,7 +177,8 @@ def _alart_curnier(r: np.ndarray, u: np.ndarray, bias: np.ndarray, mu: np.ndarra
     G[:, 1:, 1:] = np.where(inside[:, None, None] & movable[:, None, None], eye, 0.0)
     G[slide, 1:, 1:] = ((radius[slide] / safe[slide])[:, None, None]
                         * (eye - unit[slide, :, None] * unit[slide, None, :]))
-    G[slide, 1:, 0] = (mu[slide] * pressed[slide])[:, None] * unit[slide]
+    if threshold is None:
+        G[slide, 1:, 0] = (mu[slide] * pressed[slide])[:, None] * unit[slide]
     return _Linearised(phi, G)
 
 
@@ -201,8 +219,10 @@ def _newton_step(lin: _Linearised, rho: np.ndarray, W: sp.csr_matrix) -> np.ndar
     return dr
 
 
-def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
-            ) -> ContactResult:
+def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
+            threshold: np.ndarray | None = None) -> ContactResult:
+    """Semismooth Newton on the Alart–Curnier function from P (Coulomb; with ``threshold``
+    the Tresca problem of that fixed friction bound, whose residual is then its own Φ)."""
     n, d = problem.n_contacts, problem.dim
     frames = problem.frames()
     T = _block_diagonal(frames)
@@ -218,18 +238,24 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
 
     def evaluate(r):
         u = (q + W @ r).reshape(n, d)
-        return u, _alart_curnier(r.reshape(n, d), u, bias, mu, rho, movable)
+        return u, _alart_curnier(r.reshape(n, d), u, bias, mu, rho, movable, threshold)
+
+    def measure(r, u, lin):
+        P, w = to_global(frames, r.reshape(n, d)), to_global(frames, u)
+        if threshold is None:
+            return residual_norm(problem, P, w, options.floor)
+        return relative_error(problem, lin.phi, P, w, options.floor)  # Tresca's own Φ
 
     u, lin = evaluate(r)
     merit = 0.5 * float(np.sum(lin.phi ** 2))
     history = []
     iterations = 0
-    residual = residual_norm(problem, to_global(frames, r.reshape(n, d)),
-                             to_global(frames, u), options.floor)
+    residual = measure(r, u, lin)
     history.append(residual)
     best = (residual, r, iterations)
+    progress = (merit, iterations)  # the merit at its last real decrease
     while (residual > options.tolerance and iterations < options.max_iterations
-           and iterations - best[2] < STAGNATION_ITERATIONS):
+           and iterations - progress[1] < STAGNATION_ITERATIONS):
         iterations += 1
         dr = _newton_step(lin, rho, W)
         step = 1.0
@@ -244,14 +270,41 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
         if not np.isfinite(merit_try):
             break  # no finite trial along the direction: the best iterate stands
         r, u, lin, merit = r_try, u_try, lin_try, merit_try
-        residual = residual_norm(problem, to_global(frames, r.reshape(n, d)),
-                                 to_global(frames, u), options.floor)
+        residual = measure(r, u, lin)
         history.append(residual)
         if residual < best[0]:
             best = (residual, r, iterations)
+        if merit < STAGNATION_DECREASE * progress[0]:
+            progress = (merit, iterations)
     # an indefinite W (a body's exact tangent under compression) can make the active set
     # cycle near the solution: the best iterate is returned
     residual, r = best[0], best[1]
     P = to_global(frames, r.reshape(n, d))
     return ContactResult(P, contact_status(problem, P), iterations, residual,
                          residual <= options.tolerance, history)
+
+
+def _tresca_fixed_point(problem: ContactProblem, start: ContactResult,
+                        options: ContactSolverOptions) -> ContactResult:
+    """Coulomb friction as a sequence of Tresca problems: the friction bound s = μ P_n of
+    the current impulses held fixed, the problem (then monotone for a symmetric W) solved
+    by the semismooth Newton, s updated, until the Coulomb residual meets the tolerance
+    (a fixed point of s ↦ μ P_n(s) solves the Coulomb problem)."""
+    best, P = start, start.impulse
+    iterations, history = start.iterations, list(start.history)
+    inner = replace(options, tolerance=TRESCA_TOLERANCE_FRACTION * options.tolerance)
+    for _ in range(TRESCA_ITERATIONS):
+        bound = problem.mu * np.maximum(np.einsum("ci,ci->c", P, problem.normal), 0.0)
+        tresca = _newton(problem, P, inner, threshold=bound)
+        iterations += tresca.iterations
+        P = tresca.impulse
+        residual = residual_norm(problem, P, floor=options.floor)
+        history.append(residual)
+        if residual < best.residual:
+            best = ContactResult(P, tresca.status, iterations, residual,
+                                 residual <= options.tolerance)
+        if residual <= options.tolerance:
+            break
+    return replace(best, iterations=iterations, history=history)
+
+

@@ -245,6 +245,8 @@ class KernelSurface:
         compute_stencils(x, lattice.node_origin, lattice.h, kind, base, N, np.empty((n, s**d, d)))
         rows, weights = np.empty((n, s**d), np.int64), np.empty((n, s**d))
         _stencil_rows(base, N, step.box.lower, step.box.shape, step.active_row, rows, weights)
+        offsets = _stencil_offsets(base, lattice.node_origin, lattice.h, s, x)
+        _first_moment_correction(offsets, weights)
         return rows, weights
 
 
@@ -270,6 +272,29 @@ def _stencil_rows(base, N, lower, shape, active_row, rows, weights):
             total += weights[p, k]
         for k in range(ns):
             weights[p, k] = weights[p, k] / total if total > 0.0 else 0.0
+
+
+def _stencil_offsets(base: np.ndarray, origin: np.ndarray, h: float, s: int,
+                     x: np.ndarray) -> np.ndarray:
+    """X_k − x for each stencil node k of each x (n, s^d, d), in compute_stencils' order
+    (first axis fastest)."""
+    n, d = base.shape
+    local = np.stack(np.meshgrid(*([np.arange(s)] * d), indexing="ij"), axis=-1)
+    local = local.transpose(*reversed(range(d)), d).reshape(-1, d)  # first axis fastest
+    return origin + (base[:, None, :] + local[None, :, :]) * h - x[:, None, :]
+
+
+def _first_moment_correction(offsets: np.ndarray, weights: np.ndarray) -> None:
+    """Make weights w_k (Σ w = 1, some nodes dropped) reproduce linear fields at x:
+    w_k ← w_k (1 − (X_k − x̄)ᵀ C⁺ (x̄ − x)), x̄ − x = Σ w_k (X_k − x), C = Σ w_k (X_k − x̄)
+    (X_k − x̄)ᵀ, so that Σ w_k = 1 and Σ w_k X_k = x (a rigid motion's velocity at x; an
+    impulse through them acts at x, with its moment). Where the remaining nodes lie on a
+    line (C singular: linear hats) only the component along it is corrected."""
+    mean = np.einsum("pk,pkj->pj", weights, offsets)
+    centred = offsets - mean[:, None, :]
+    C = np.einsum("pk,pki,pkj->pij", weights, centred, centred)
+    coef = -np.einsum("pij,pj->pi", np.linalg.pinv(C, rcond=1e-8, hermitian=True), mean)
+    weights *= 1.0 + np.einsum("pkj,pj->pk", centred, coef)
 
 
 def cell_extent(F: np.ndarray, n: np.ndarray, spacing: float, round_body: bool) -> np.ndarray:
