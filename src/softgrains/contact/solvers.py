@@ -50,8 +50,9 @@ LINE_SEARCH_HALVINGS = 12
 NSGS_FALLBACK_SWEEPS = 500  # Gauss–Seidel sweeps after a Newton solve that did not converge
 STAGNATION_ITERATIONS = 30  # Newton stops when its merit has not decreased in this many
 STAGNATION_DECREASE = 0.99  # ... iterations by at least this factor
-TRESCA_ITERATIONS = 30  # friction-bound updates of the Tresca fixed point (a stalled Newton)
+TRESCA_ITERATIONS = 60  # friction-bound updates of the Tresca fixed point (a stalled Newton)
 TRESCA_TOLERANCE_FRACTION = 0.1  # each Tresca problem to this fraction of the tolerance
+TRESCA_STAGNATION = 5  # ... and it stops after this many updates without a better residual
 
 
 @dataclass(frozen=True)
@@ -93,18 +94,24 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     result = _newton(problem, P, options)
     if result.converged:
         return result
-    if np.any(problem.mu > 0.0):
-        result = _tresca_fixed_point(problem, result, options)
-        if result.converged:
-            return result
     # the Alart–Curnier Newton has no global convergence with Coulomb friction (seen
     # stalling at 3e-2 on a frictional compaction step whose problem Gauss–Seidel solves in
-    # 540 sweeps); Gauss–Seidel from its best iterate, the better of the two returned
+    # 540 sweeps): Gauss–Seidel from its best iterate (cheap sweeps), then the Tresca fixed
+    # point from the better of the two (redundant point contacts at quasi-static steps,
+    # where Gauss–Seidel stalls: cond(W) ~ 10¹¹)
     sweeps = _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
         "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor))
-    best = sweeps if sweeps.residual < result.residual else result
-    return ContactResult(best.impulse, best.status, result.iterations + sweeps.iterations,
-                         best.residual, best.converged, result.history + sweeps.history)
+    result = _better(result, sweeps)
+    if result.converged or not np.any(problem.mu > 0.0):
+        return result
+    return _better(result, _tresca_fixed_point(problem, result, options))
+
+
+def _better(first: ContactResult, second: ContactResult) -> ContactResult:
+    """The result with the smaller residual, with the iterations and history of both."""
+    best = second if second.residual < first.residual else first
+    return ContactResult(best.impulse, best.status, first.iterations + second.iterations,
+                         best.residual, best.converged, first.history + second.history)
 
 
 def contact_status(problem: ContactProblem, P: np.ndarray) -> np.ndarray:
@@ -291,7 +298,7 @@ def _tresca_fixed_point(problem: ContactProblem, start: ContactResult,
     by the semismooth Newton, s updated, until the Coulomb residual meets the tolerance
     (a fixed point of s ↦ μ P_n(s) solves the Coulomb problem)."""
     best, P = start, start.impulse
-    iterations, history = start.iterations, list(start.history)
+    iterations, history, best_at = 0, [], 0
     inner = replace(options, tolerance=TRESCA_TOLERANCE_FRACTION * options.tolerance)
     for _ in range(TRESCA_ITERATIONS):
         bound = problem.mu * np.maximum(np.einsum("ci,ci->c", P, problem.normal), 0.0)
@@ -303,7 +310,8 @@ def _tresca_fixed_point(problem: ContactProblem, start: ContactResult,
         if residual < best.residual:
             best = ContactResult(P, tresca.status, iterations, residual,
                                  residual <= options.tolerance)
-        if residual <= options.tolerance:
+            best_at = len(history)
+        if residual <= options.tolerance or len(history) - best_at >= TRESCA_STAGNATION:
             break
     return replace(best, iterations=iterations, history=history)
 
