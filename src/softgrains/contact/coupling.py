@@ -237,7 +237,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         V = slots.stack(lambda body, rows, du=du: _predicted_velocity(steps[body], rows,
                                                                       du.get(body)))
         problem = _problem(slots, contacts, wall_va, wall_vb, bias, mu, V, P)
-        result = solve(problem, P, options)
+        # the Tresca fallback needs a PSD W: every body in contact on a projected tangent
+        psd = not delassus or all(steps[b].projected for b in slots.bodies)
+        result = solve(problem, P, replace(options, tresca=psd))
         failed_solves += result.residual > settings.tolerance
         if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k == AUTO_TANGENT_ITERATIONS:
             # tangent = "auto": an exact tangent can make W indefinite under compression

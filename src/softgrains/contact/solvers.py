@@ -59,12 +59,15 @@ TRESCA_STAGNATION = 5  # ... and it stops after this many updates without a bett
 class ContactSolverOptions:
     """``method``: newton | nsgs; ``tolerance``: on the relative natural-map residual;
     ``max_iterations``: Newton iterations or Gauss–Seidel sweeps; ``floor``: an impulse
-    below which the relative residual is measured against the floor instead."""
+    below which the relative residual is measured against the floor instead; ``tresca``:
+    whether a stalled Newton may end with the Tresca fixed point (its Tresca problems are
+    monotone only for a symmetric PSD W: not with an exact tangent under compression)."""
 
     method: str = "newton"
     tolerance: float = 1e-6
     max_iterations: int = 50
     floor: float = 0.0
+    tresca: bool = True  # the Tresca fixed point as the last fallback (needs W symmetric PSD)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -102,7 +105,7 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     sweeps = _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
         "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor))
     result = _better(result, sweeps)
-    if result.converged or not np.any(problem.mu > 0.0):
+    if result.converged or not options.tresca or not np.any(problem.mu > 0.0):
         return result
     return _better(result, _tresca_fixed_point(problem, result, options))
 
