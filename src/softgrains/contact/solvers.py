@@ -18,10 +18,11 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   sample, W singular — that can take 20–40 iterations whose best residual stalls for ten
   while the merit still falls: it stops only when ½‖Φ‖² has not fallen by 1% in
   STAGNATION_ITERATIONS). With friction it can stall or cycle (no global convergence for
-  the non-associated Coulomb law): then the **Tresca fixed point** — the friction bound
-  s = μ P_n held, the Tresca problem (monotone for a symmetric W) solved by the same
-  Newton, s updated — and if that fails too, up to NSGS_FALLBACK_SWEEPS Gauss–Seidel
-  sweeps from the best iterate. Dimension-generic (the 3D cone's projection is exact).
+  the non-associated Coulomb law): then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps
+  from its best iterate and, if they fail too and ``options.tresca`` allows it, the
+  **Tresca fixed point** — the friction bound s = μ P_n held, the Tresca problem
+  (monotone for a symmetric PSD W) solved by the same Newton, s updated. Dimension-generic
+  (the 3D cone's projection is exact).
 - ``nsgs``: nonlinear Gauss–Seidel over contacts with the exact local solution
   (gauss_seidel.py).
 """
@@ -317,5 +318,3 @@ def _tresca_fixed_point(problem: ContactProblem, start: ContactResult,
         if residual <= options.tolerance or len(history) - best_at >= TRESCA_STAGNATION:
             break
     return replace(best, iterations=iterations, history=history)
-
-
