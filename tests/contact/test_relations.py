@@ -249,7 +249,8 @@ def test_stacked_disks_boundary_gap(d_over_h, seeding, removal, tolerance, betwe
     assert abs(on_slab) < min(max(abs(low), abs(high)), 0.05)
 
 
-def _disk_sliding_on_block(keep_closed=False, grain_sites="nodes", shape_function="linear"):
+def _disk_sliding_on_block(keep_closed=False, grain_sites="nodes", shape_function="linear",
+                           wall_sites="nodes"):
     """A lattice-seeded disk (R = 0.2 m, D/h = 10, E = 0.1 MPa) launched at 0.5 m/s along a
     frictionless deformable block (held by a kinematic slab, μ = 1 between them) under
     gravity, θ = 1, Δt = 10 ms, 1 s: it slides 0.5 m (12 cells) across the lattice."""
@@ -266,6 +267,7 @@ def _disk_sliding_on_block(keep_closed=False, grain_sites="nodes", shape_functio
                     "upper": [1.95, 0.3], "material": "gel", "kind": "kinematic"}],
         "gravity": {"acceleration": [0.0, -10.0]},
         "contact": {"keep_closed": keep_closed, "grain_sites": grain_sites,
+                    "wall_sites": wall_sites,
                     "pairs": [{"bodies": ["block", "slab"], "friction": 1.0}]},
     }))
 

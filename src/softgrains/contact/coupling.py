@@ -2,8 +2,9 @@
 step of the bodies with a complete solve of the contact problem.
 
     set up every deformable body's step; find the contact nodes, normals and gaps (between
-        two grains, by default, point-to-surface contacts instead: surfaces.py, sites.py;
-        the problem is posed on contact sites, nodes or points); the gap
+        two grains, by default, point-to-surface contacts instead, grouped in patches
+        against walls: surfaces.py, patches.py, sites.py; the problem is posed on contact
+        sites: nodes, points or patches); the gap
         bias b = (g + (1 − θ)Δt w_n^n)/(θΔt) keeps the end-of-step gap of the integrator's
         own displacement ≥ 0 (overlaps clipped or partly removed, gap.py); a contact loaded
         at the previous step starts closed, g = min(estimate, 0) (keep_closed)
@@ -112,7 +113,7 @@ class ContactState:
 
 def _keys(nodes: ContactNodes) -> list[tuple[int, int, int, int]]:
     """(node, α, β, site) per contact: what identifies a contact from one step to the next
-    (site: −1 at a node, the point's code for a surface contact)."""
+    (site: −1 at a node, the point's code or −2 (a patch at a wall) for surface contacts)."""
     site = nodes.site if nodes.site is not None else np.full(len(nodes), -1)
     return list(zip(nodes.node.tolist(), nodes.alpha.tolist(), nodes.beta.tolist(),
                     site.tolist(), strict=True))
@@ -147,7 +148,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     contacts = subset(contacts, usable)
     d = lattice.dim
     gaps = np.zeros(len(contacts))
-    stencils, points = None, None
+    stencils, points, reported = None, None, None
     if gap_points is not None and len(contacts) and "surface" in (settings.grain_sites,
                                                                   settings.wall_sites):
         # the pairs taken at points leave the nodal set before its gaps are estimated
@@ -163,7 +164,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                                              at_wall))
         gaps = boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies, near)
     if points is not None:
-        contacts, gaps, stencils = with_point_contacts(lattice, steps, contacts, gaps, points)
+        contacts, gaps, reported, stencils = with_point_contacts(lattice, steps, contacts,
+                                                                 gaps, points)
     n = len(contacts)
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)
@@ -198,7 +200,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         for c, key in enumerate(_keys(contacts)):
             if key in previous:
                 P[c] = previous[key]
-    estimated = gaps
+    estimated = gaps if reported is None else reported
     if settings.keep_closed:
         gaps = np.where(np.any(P != 0.0, axis=1), np.minimum(gaps, 0.0), gaps)
     predicted = gaps + (1.0 - theta) * dt * start

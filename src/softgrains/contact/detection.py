@@ -37,8 +37,8 @@ class NodalField:
 @dataclass(frozen=True)
 class ContactNodes:
     """One row per (node, body pair): global node index, α, β, unit normal from β into α,
-    and the local node index of that node in α's and in β's box. (A surface contact, at a
-    point, names the node nearest to it and its point in ``site``.)"""
+    and the local node index of that node in α's and in β's box. (A surface contact names
+    the node nearest to its point or points, and its site.)"""
 
     node: np.ndarray
     alpha: np.ndarray
@@ -46,8 +46,9 @@ class ContactNodes:
     normal: np.ndarray
     local_alpha: np.ndarray
     local_beta: np.ndarray
-    # surface contacts (surfaces.py): 2p (α's point p) or 2p + 1 (β's point p); −1 at a
-    # node; None when every contact is at a node
+    # surface contacts (surfaces.py, patches.py): 2p (α's point p) or 2p + 1 (β's point p)
+    # between grains, −2 for a patch against a wall; −1 at a node; None when every contact
+    # is at a node
     site: np.ndarray | None = None
     position: np.ndarray | None = None  # (n, d) where each contact acts (None: its node)
 

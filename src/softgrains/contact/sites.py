@@ -1,11 +1,13 @@
 """Where a contact takes each body's velocity (its site), and the body-side maps of the
 coupled loop (coupling.py).
 
-A site is a node (nodal contacts, detection.py/gap.py) or a point (point-to-surface contacts,
-surfaces.py) whose velocity is a weighted sum of the body's nodal velocities,
-v_s = Σ_I H_sI v_I, with an exact normal rate in place of the sampled one along a surface's
-normal. The contact problem (problem.py) is posed on sites: V_s = H V_rows,
-W_sites = H W_rows Hᵀ, and impulses q at the sites act on the node rows as Hᵀ q.
+A site is a node (nodal contacts, detection.py/gap.py), a point or a patch of points
+(point-to-surface contacts, surfaces.py; patches.py groups them against walls) whose
+velocity is a linear map of the body's nodal velocities, v_s = Σ_I H_sI v_I (d × d blocks:
+a point's own interpolation, a surface's exact normal rate in place of the sampled one
+along its normal, each point of a patch turned onto the patch's normal). The contact
+problem (problem.py) is posed on sites: V_s = H V_rows, W_sites = H W_rows Hᵀ, and impulses
+q at the sites act on the node rows as Hᵀ q.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from softgrains.contact.detection import ContactNodes, node_position
+from softgrains.contact.patches import aggregate, group
 from softgrains.contact.surfaces import (
     SurfaceContacts,
     merge,
@@ -39,10 +42,10 @@ def subset(contacts: ContactNodes, keep: np.ndarray) -> ContactNodes:
 class Slots:
     """The deformable bodies in contact, their contact sites and compliances.
 
-    A site is where a contact takes a body's velocity: a node (nodal contacts) or a point
-    (surface contacts, surfaces.py) whose velocity is a weighted sum of nodal velocities,
-    v_s = Σ_I H_sI v_I. Per body: the distinct node rows its sites touch and H (sites ×
-    rows; None when every site is a node of its own). The contact problem sees sites:
+    A site is where a contact takes a body's velocity: a node (nodal contacts), a point or
+    a patch of points (surface contacts, surfaces.py and patches.py), v_s = Σ_I H_sI v_I.
+    Per body: the distinct node rows its sites touch and H (sites × rows; None when every
+    site is a node of its own). The contact problem sees sites:
     V_s = H V_rows, W_sites = H W_rows Hᵀ (per component), and an impulse q at the sites
     acts on the rows as Hᵀ q.
     """
@@ -74,10 +77,9 @@ class Slots:
                 slots[c] = slot
                 cols[c] = inverse[start:start + c.size]
                 start += c.size
-            site_rows = np.concatenate([st.rows[c] for c, st, *_ in parts])[first]
-            if site_rows.shape[1] == 1:  # nodal sites: keys are the rows, in order
+            if np.all(site_keys >= 0):  # nodal sites: keys are the rows, in order
                 self.H.append(None)
-                rows = site_rows[:, 0]
+                rows = site_keys
             else:
                 rows, H = _site_map(parts, first, site_keys.size, self.d)
                 self.H.append(H)
@@ -119,51 +121,28 @@ class Slots:
 
 @dataclass(frozen=True)
 class SideStencils:
-    """One side (α or β) of every contact: the active node rows its velocity is taken
-    from (−1: none), their weights, and a key naming the site (equal keys: one site)."""
+    """One side (α or β) of every contact: its site's velocity v = Σ_k B_k v_{rows_k} from
+    the body's active node rows (−1: none) through d × d blocks B_k, and a key naming the
+    site (equal keys: one site)."""
 
     rows: np.ndarray  # (n, s)
-    weights: np.ndarray  # (n, s)
+    blocks: np.ndarray  # (n, s, d, d)
     key: np.ndarray  # (n,)
-    # optional: the site's velocity along ``rate_normal`` is Σ_k rate_vec_k·v_{rate_rows_k}
-    # (exact rate of a smoothed surface), its other components Σ_k weights_k v_{rows_k}
-    rate_rows: np.ndarray | None = None  # (n, r), −1: none
-    rate_vec: np.ndarray | None = None  # (n, r, d)
-    rate_normal: np.ndarray | None = None  # (n, d)
 
 
 def _site_map(parts, first: np.ndarray, n_sites: int, d: int):
-    """The distinct node rows of a body's sites and the sparse map Hd (sites·d × rows·d):
-    v_site = Σ_k w_k v_{row_k}, except along a site's ``rate_normal`` n where a surface's
-    exact normal velocity replaces it: v_site = (I − n nᵀ) Σ_k w_k v_k + n Σ_k a_kᵀ v_k."""
-    def gather(name):
-        arrays = [getattr(st, name) for _c, st, *_ in parts]
-        if any(a is None for a in arrays):
-            return None
-        return np.concatenate([a[c] for a, (c, *_) in zip(arrays, parts, strict=True)])[first]
-    site_rows, site_w = gather("rows"), gather("weights")
-    rate_rows, rate_vec, rate_n = gather("rate_rows"), gather("rate_vec"), gather("rate_normal")
-    all_rows = [site_rows[site_rows >= 0]]
-    if rate_rows is not None:
-        all_rows.append(rate_rows[rate_rows >= 0])
-    rows = np.unique(np.concatenate(all_rows))
-    eye = np.eye(d)
-    if rate_n is None:
-        proj = np.broadcast_to(eye, (n_sites, d, d))
-    else:
-        has = (rate_rows >= 0).any(axis=1)
-        proj = eye - has[:, None, None] * np.einsum("si,sj->sij", rate_n, rate_n)
-    # sampled part: block w_k (I − n nᵀ) at (site, row_k)
+    """The distinct node rows of a body's sites and the sparse map H (sites·d × rows·d)
+    with v_site = Σ_k B_k v_{row_k}."""
+    width = max(st.rows.shape[1] for _c, st, *_ in parts)
+    site_rows = np.concatenate([np.pad(st.rows[c], ((0, 0), (0, width - st.rows.shape[1])),
+                                       constant_values=-1) for c, st, *_ in parts])[first]
+    site_blocks = np.concatenate([np.pad(st.blocks[c], ((0, 0), (0, width - st.rows.shape[1]),
+                                                        (0, 0), (0, 0)))
+                                  for c, st, *_ in parts])[first]
+    rows = np.unique(site_rows[site_rows >= 0])
     s_idx, k_idx = np.nonzero(site_rows >= 0)
-    blocks = site_w[s_idx, k_idx, None, None] * proj[s_idx]
     cols = np.searchsorted(rows, site_rows[s_idx, k_idx])
-    all_s, all_c, all_b = [s_idx], [cols], [blocks]
-    if rate_rows is not None:
-        s2, k2 = np.nonzero(rate_rows >= 0)
-        all_s.append(s2)
-        all_c.append(np.searchsorted(rows, rate_rows[s2, k2]))
-        all_b.append(np.einsum("si,sj->sij", rate_n[s2], rate_vec[s2, k2]))
-    s_idx, cols, blocks = np.concatenate(all_s), np.concatenate(all_c), np.concatenate(all_b)
+    blocks = site_blocks[s_idx, k_idx]
     i, j = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
     r = (s_idx[:, None, None] * d + i).ravel()
     c = (cols[:, None, None] * d + j).ravel()
@@ -173,6 +152,7 @@ def _site_map(parts, first: np.ndarray, n_sites: int, d: int):
 
 def nodal_stencils(steps: dict, contacts: ContactNodes) -> tuple[SideStencils, SideStencils]:
     """Nodal contacts: each side's site is its node (key: the node's active row)."""
+    d = contacts.normal.shape[1]
     out = []
     for bodies, local in ((contacts.alpha, contacts.local_alpha),
                           (contacts.beta, contacts.local_beta)):
@@ -181,8 +161,23 @@ def nodal_stencils(steps: dict, contacts: ContactNodes) -> tuple[SideStencils, S
             s = steps.get(int(bodies[c]))
             if s is not None:
                 rows[c, 0] = s.active_row[local[c]]
-        out.append(SideStencils(rows, np.ones((len(contacts), 1)), rows[:, 0].copy()))
+        blocks = np.broadcast_to(np.eye(d), (len(contacts), 1, d, d))
+        out.append(SideStencils(rows, blocks, rows[:, 0].copy()))
     return out[0], out[1]
+
+
+def point_blocks(rows: np.ndarray, weights: np.ndarray, rate_rows: np.ndarray,
+                 rate_vec: np.ndarray, rate_normal: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """A point site's velocity as blocks: v = Σ_k w_k v_k, except along ``rate_normal`` n
+    where a surface's exact normal velocity replaces it (where the site has rate rows):
+    v = (I − n nᵀ) Σ_k w_k v_k + n Σ_k a_kᵀ v_k."""
+    n, d = rate_normal.shape
+    has = (rate_rows >= 0).any(axis=1)
+    proj = np.eye(d) - has[:, None, None] * np.einsum("si,sj->sij", rate_normal, rate_normal)
+    sampled = weights[:, :, None, None] * proj[:, None]
+    rate = np.einsum("si,skj->skij", rate_normal, rate_vec)
+    return np.concatenate([rows, rate_rows], axis=1), np.concatenate([sampled, rate], axis=1)
 
 
 def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: ContactNodes,
@@ -209,44 +204,40 @@ def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: Contact
 
 
 def with_point_contacts(lattice: Lattice, steps: dict, nodal: ContactNodes, gaps: np.ndarray,
-                        sc: SurfaceContacts
-                        ) -> tuple[ContactNodes, np.ndarray, tuple[SideStencils, SideStencils]]:
-    """The nodal contacts (with their ``gaps``) and the point contacts ``sc`` as one set:
-    the contacts, their gaps and both sides' stencils (nodal sides padded to the points'
-    stencil width)."""
-    nodal_sides = nodal_stencils(steps, nodal)
-    width = sc.rows_alpha.shape[1]
+                        sc: SurfaceContacts) -> tuple[ContactNodes, np.ndarray, np.ndarray,
+                                                      tuple[SideStencils, SideStencils]]:
+    """The nodal contacts (with their ``gaps``) and the point contacts ``sc``, grouped into
+    patches (patches.py), as one set: the contacts, their gaps, the gaps to report (a
+    patch's least member gap) and both sides' stencils (padded to a common width)."""
     d = lattice.dim
-    n_codes = max(steps) + 2
-    owner = np.where(sc.owner_is_alpha, sc.alpha, sc.beta)
-    own_key = -1 - sc.point * n_codes
-    foreign_key = own_key - 1 - owner
+    found = group(sc.alpha, sc.beta, sc.position, sc.normal, sc.gap, lattice.node_origin,
+                  lattice.h, lattice.n_nodes,
+                  alone=np.where(np.isin(sc.beta, list(steps)),
+                                 2 * sc.point + (~sc.owner_is_alpha), -1))
+    no_rate = -np.ones_like(sc.rate_rows)
     sides = []
     for which, (rows, weights) in enumerate(((sc.rows_alpha, sc.weights_alpha),
                                              (sc.rows_beta, sc.weights_beta))):
-        mine = sc.owner_is_alpha if which == 0 else ~sc.owner_is_alpha
-        at_nodes = nodal_sides[which]
+        # the exact surface rate belongs to the body whose surface the point is measured on
+        surface_side = ~sc.owner_is_alpha if which == 0 else sc.owner_is_alpha
+        rate_rows = np.where(surface_side[:, None], sc.rate_rows, no_rate)
+        patch_rows, patch_blocks = aggregate(found, *point_blocks(
+            rows, weights, rate_rows, sc.rate_vec, sc.rate_normal))
+        at_nodes = nodal_stencils(steps, nodal)[which]
+        width = max(patch_rows.shape[1], 1)
         padded_rows = -np.ones((len(nodal), width), np.int64)
         padded_rows[:, 0] = at_nodes.rows[:, 0]
-        padded_w = np.zeros((len(nodal), width))
-        padded_w[:, 0] = 1.0
-        width_r = sc.rate_rows.shape[1]
-        rate_rows = -np.ones((len(nodal) + len(sc), width_r), np.int64)
-        rate_vec = np.zeros((len(nodal) + len(sc), width_r, d))
-        surface_side = ~mine  # the body whose surface the point is measured against
-        rate_rows[len(nodal):][surface_side] = sc.rate_rows[surface_side]
-        rate_vec[len(nodal):][surface_side] = sc.rate_vec[surface_side]
-        sides.append(SideStencils(np.r_[padded_rows, rows], np.r_[padded_w, weights],
-                                  np.r_[at_nodes.key, np.where(mine, own_key, foreign_key)],
-                                  rate_rows, rate_vec,
-                                  np.r_[np.zeros((len(nodal), d)), sc.rate_normal]))
-    index = np.rint((sc.position - lattice.node_origin) / lattice.h).astype(np.int64)
-    strides = np.r_[1, np.cumprod(lattice.n_nodes[:-1])].astype(np.int64)
-    none = -np.ones(len(sc), np.int64)
+        padded_blocks = np.zeros((len(nodal), width, d, d))
+        padded_blocks[:, 0] = np.eye(d)
+        sides.append(SideStencils(np.r_[padded_rows, patch_rows],
+                                  np.r_[padded_blocks, patch_blocks],
+                                  np.r_[at_nodes.key, -1 - np.arange(len(found))]))
+    none = -np.ones(len(found), np.int64)
     merged = ContactNodes(
-        np.r_[nodal.node, index @ strides], np.r_[nodal.alpha, sc.alpha],
-        np.r_[nodal.beta, sc.beta], np.r_[nodal.normal, sc.normal],
+        np.r_[nodal.node, found.node], np.r_[nodal.alpha, found.alpha],
+        np.r_[nodal.beta, found.beta], np.r_[nodal.normal, found.normal],
         np.r_[nodal.local_alpha, none], np.r_[nodal.local_beta, none],
-        np.r_[np.full(len(nodal), -1), 2 * sc.point + (~sc.owner_is_alpha)],
-        np.r_[node_position(lattice, nodal.node), sc.position])
-    return merged, np.r_[gaps, sc.gap], (sides[0], sides[1])
+        np.r_[np.full(len(nodal), -1), found.site],
+        np.r_[node_position(lattice, nodal.node), found.position])
+    return (merged, np.r_[gaps, found.gap], np.r_[gaps, found.least_gap],
+            (sides[0], sides[1]))
