@@ -109,3 +109,51 @@ def test_surface_side_velocity_is_exact_for_a_rigid_motion(shape_function):
     error = np.abs(sampled - exact)[spanning]
     assert np.max(error) < 1e-12 * np.max(np.abs(exact))
     assert np.allclose(weights.sum(axis=1), 1.0)
+
+
+@pytest.mark.parametrize("shape_function", ["linear", "bspline2"])
+@pytest.mark.parametrize("round_body", [False, True])
+def test_own_side_velocity_is_the_rate_of_the_cell_edge(shape_function, round_body):
+    """The own side of a point contact moves with the edge of the point's deformed cell,
+    x_p + r_p (r_p: surfaces.cell_support), as the point and its cell are carried by the
+    nodal velocities (ẋ_p = Σ N v, Ḟ_p = ∇v F_p): for a random nodal field and a random
+    F_p, advancing x_p and F_p by ε moves the cell's material edge point by ε Σ_I w_I v_I
+    and the edge along n (what the gap sees, ring cells too) by ε n·Σ_I w_I v_I, to the
+    difference's error; Σ w = 1 (momentum) and Σ w X = x_p + r_p (the impulse acts at the edge: the
+    lever arm of a wall's force in Σ V σ = Σ x ⊗ f: with the force at the point itself
+    and walls at points, the small compaction's volume-averaged stress came out 7.9% below
+    the wall's, session 13)."""
+    step = _body_step(shape_function, DISK)
+    rng = np.random.default_rng(4)
+    points = np.arange(0, step.pts.x.shape[0], 7)
+    F = np.eye(2) + 0.2 * rng.normal(size=(points.size, 2, 2))
+    step.pts.F[points] = F
+    n = rng.normal(size=(points.size, 2))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    spacing = 0.05
+    r = surfaces.cell_support(F, n, spacing, round_body)
+    assert np.allclose(-np.einsum("pi,pi->p", n, r),
+                       0.5 * spacing * (np.linalg.norm(np.einsum("pji,pj->pi", F, n), axis=1)
+                                        if round_body else
+                                        np.abs(np.einsum("pji,pj->pi", F, n)).sum(axis=1)))
+    rows, w = surfaces.edge_stencil(step, points, r)
+    V = rng.normal(size=(step.active.size, 2))
+    Vp = np.where(rows[:, :, None] >= 0, V[rows], 0.0)
+    predicted = np.einsum("pk,pkj->pj", w, Vp)
+    eps = 1e-7
+    grad_v = np.einsum("pki,pkj->pij", Vp, step.dN[points])  # ∇v: (∂v_i/∂x_j)
+    x_new = step.pts.x[points] + eps * np.einsum("pk,pkj->pj", step.N[points], Vp)
+    F_new = F + eps * np.einsum("pij,pjk->pik", grad_v, F)
+    # the material point of the cell's edge, F s with s fixed, moves with Σ w v ...
+    r_material = np.einsum("pij,pjk,pk->pi", F_new, np.linalg.inv(F), r)
+    moved = (x_new + r_material - step.pts.x[points] - r) / eps
+    assert np.max(np.abs(moved - predicted)) < 1e-5 * np.max(np.abs(predicted))
+    # ... and the edge along n (the gap's e = −n·r, recomputed) at the same rate
+    r_new = surfaces.cell_support(F_new, n, spacing, round_body)
+    along = np.einsum("pi,pi->p", n, x_new + r_new - step.pts.x[points] - r) / eps
+    assert np.max(np.abs(along - np.einsum("pi,pi->p", n, predicted))) < 1e-5 * np.max(
+        np.abs(predicted))
+    assert np.allclose(w.sum(axis=1), 1.0)
+    nodes = step.stepper.lattice.node_positions(step.box)[step.active]
+    Xp = np.where(rows[:, :, None] >= 0, nodes[rows], 0.0)
+    assert np.allclose(np.einsum("pk,pkj->pj", w, Xp), step.pts.x[points] + r, atol=1e-12)

@@ -313,8 +313,9 @@ class ContactSettings(_Section):
     wall_sites: Literal["nodes", "surface"] = Field(
         "nodes", description="where a grain's contacts with a kinematic rectangle or disk "
         "act: at the nodes they share (exact face normals), or at the grain's outer points "
-        "against the wall's exact face (opt-in: fails the quasi-static squeeze, "
-        "docs/dev-notes.md)")
+        "against the wall's exact face, grouped in patches of about h (opt-in: passes the "
+        "quasi-static squeeze, but in the compaction lets points ~0.45 h into the walls "
+        "and costs 2x; docs/dev-notes.md)")
     local_relation: Literal["delassus", "lumped"] = Field(
         "delassus", description="local compliance: Delassus (bodies' Newton matrices) or "
         "lumped nodal masses")

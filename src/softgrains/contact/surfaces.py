@@ -14,19 +14,27 @@ A contact is taken at every point p of the outer layer of a grain O (d_O(x_p) > 
 point spacing) that lies within T's kernel reach, for both orders of a pair (two passes).
 Its gap is the distance from T's surface to the edge of p's deformed cell, per unit of its
 rate,
-    g_p = (d_T(x_p) − e_p)/λ,   e_p = ½δ Σ_j |(F_pᵀ n_T)_j|   (½δ ‖F_pᵀ n_T‖ for ring cells),
-    λ = ‖∇d_T‖ = R ‖∇c‖/F'(F⁻¹(c))  (1 across a flat boundary),
-and its normal rate is taken exactly from both bodies' nodal velocities:
-    ġ_p λ⁻¹ = n_T·v_O(x_p) − (1/‖∇c‖) ∂c/∂t(x_p),     ∂c/∂t(x) = Σ_J a_J·v_J,
+    g_p = (d_T(x_p) − e_p)/λ,   e_p = −n_T·r_p,   r_p = −½δ F_p sign(F_pᵀ n_T)
+    (ring cells: r_p = −½δ F_p F_pᵀn_T/‖F_pᵀn_T‖),  λ = ‖∇d_T‖ = R ‖∇c‖/F'(F⁻¹(c))
+    (1 across a flat boundary),
+and its normal rate is taken from both bodies' nodal velocities:
+    ġ_p λ⁻¹ ≈ n_T·v_O(x_p + r_p) − (1/‖∇c‖) ∂c/∂t(x_p),     ∂c/∂t(x) = Σ_J a_J·v_J,
+    v_O(x_p + r_p) = Σ_I v_I [N_I(x_p) + ∇N_I(x_p)·r_p],
     a_J = Σ_q V_q [−∇W(x − x_q) N_J(x_q) + W(x − x_q) ∇N_J(x_q)]
-(T's points moving with ẋ_q = Σ_J N_J(x_q) v_J, their volumes with V̇_q = V_q ∇·v;
-Σ_J a_J = −∇c, so momentum is exchanged exactly). The own side's velocity is the point's own
-interpolation v_O(x_p) = Σ_I N_I(x_p) v_I (what moves p); the surface side's, along n_T, is
-the motion of T's smoothed surface above and, across n_T (friction), T's velocity field at
-x_p. Taking the surface's normal velocity from where T's points are — not T's velocity
-field at x_p, a point outside T — is what keeps the constraint tight while T deforms: with
-the sampled velocity the gap fell up to 0.13 h a step below its prediction at an impact
-(session 11, docs/dev-notes.md).
+(p moving with Σ_I N_I v_I and its cell with Ḟ = ∇v F; T's points moving with ẋ_q =
+Σ_J N_J(x_q) v_J, their volumes with V̇_q = V_q ∇·v; Σ_J a_J = −∇c, so momentum is
+exchanged exactly). Against a wall the own side's velocity is that of p's cell edge,
+v_O(x_p + r_p) (session 13: with p's own velocity the edge's motion was left out of the
+rate and the force acted h/4 inside the grain, so the wall's force had the wrong lever arm:
+the small compaction's volume-averaged stress came out 7.9% below the wall's, 2.8% with
+the edge). Between grains it is still p's own velocity v_O(x_p), which the first line
+approximates to O(δ‖∇v‖): with the edge there the sliding disk of the tests sank 0.063 h
+into its block (0.05 h bar; measured with undeformed half cells), not yet understood.
+The surface side's velocity, along n_T, is the motion of T's smoothed surface above and,
+across n_T (friction), T's velocity field at x_p. Taking the surface's normal velocity from
+where T's points are — not T's velocity field at x_p, a point outside T — is what keeps the
+constraint tight while T deforms: with the sampled velocity the gap fell up to 0.13 h a
+step below its prediction at an impact (session 11, docs/dev-notes.md).
 """
 
 from __future__ import annotations
@@ -297,13 +305,28 @@ def _first_moment_correction(offsets: np.ndarray, weights: np.ndarray) -> None:
     weights *= 1.0 + np.einsum("pkj,pj->pk", centred, coef)
 
 
-def cell_extent(F: np.ndarray, n: np.ndarray, spacing: float, round_body: bool) -> np.ndarray:
-    """Half-extent along n of each point's deformed cell, edges F δ e_j:
-    e = ½δ Σ_j |(Fᵀn)_j| (lattice squares); ½δ ‖Fᵀn‖ for ring cells (one edge along the
-    radius, taken along n)."""
+def cell_support(F: np.ndarray, n: np.ndarray, spacing: float, round_body: bool
+                 ) -> np.ndarray:
+    """Offset r from each point to the point of its deformed cell furthest along −n (where
+    the cell meets a surface with outward normal n in front of it): lattice squares, edges
+    F δ e_j: r = −½δ F sign(Fᵀn); ring cells (one edge along the radius, taken along n):
+    r = −½δ F Fᵀn/‖Fᵀn‖. The cell's half-extent along n is e = −n·r."""
     FTn = np.einsum("pji,pj->pi", F, np.nan_to_num(n))
-    return 0.5 * spacing * (np.linalg.norm(FTn, axis=1) if round_body
-                            else np.abs(FTn).sum(axis=1))
+    if round_body:
+        s = FTn / np.maximum(np.linalg.norm(FTn, axis=1), 1e-300)[:, None]
+    else:
+        s = np.sign(FTn)
+    return -0.5 * spacing * np.einsum("pij,pj->pi", F, s)
+
+
+def edge_stencil(step, points: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The velocity of the material at x_p + r_p as the point's cell carries it (x_p and F_p
+    moving with the nodal velocities): v = Σ_I v_I [N_I(x_p) + ∇N_I(x_p)·r_p] (rows, weights).
+    It is the exact rate of the gap's cell edge (ė = −n·Ḟ s with Ḟ = ∇v F), and an impulse
+    through it acts at the edge (Σ_I w_I X_I = x_p + r_p), so that the wall's force has its
+    lever arm to the boundary in Σ_p V_p σ_p = Σ x ⊗ f."""
+    weights = step.N[points] + np.einsum("pkj,pj->pk", step.dN[points], r)
+    return step.active_row[step.nodes[points]], weights
 
 
 def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float,
@@ -329,8 +352,8 @@ def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float,
         n_out = -grad / length[:, None]
         # the distance to T's surface less the point's half cell, per unit of its rate
         # n·(v_O − v_T): g/λ
-        gap = (distance - cell_extent(O.step.pts.F[candidates], n_out, spacing,
-                                      round_body)) / lam
+        support = cell_support(O.step.pts.F[candidates], n_out, spacing, round_body)
+        gap = (distance + np.einsum("pi,pi->p", n_out, support)) / lam
     rows, weights = T.velocity_stencil(xc)
     reached = ((c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap) & (gap < reach)
                & (weights.sum(axis=1) > 0.5))
@@ -383,15 +406,16 @@ def wall_contacts(pairs: list[tuple[int, int]], steps: dict, shapes: dict, spaci
         value, grad, _ = O.field(x[near])
         own_distance, _ = calibrated_distance(value, grad, O.radius)
         keep = near[own_distance > -spacing]
-        gap = distance[keep] - cell_extent(O.step.pts.F[keep], n_out[keep], spacing,
-                                           grain in round_bodies)
-        keep, gap = keep[gap < reach], gap[gap < reach]
+        support = cell_support(O.step.pts.F[keep], n_out[keep], spacing,
+                               grain in round_bodies)
+        gap = distance[keep] + np.einsum("pi,pi->p", n_out[keep], support)
+        keep, gap, support = keep[gap < reach], gap[gap < reach], support[gap < reach]
         n, d = keep.size, x.shape[1]
         width = O.step.N.shape[1]
         none = -np.ones((n, width), np.int64)
         parts.append((np.full(n, grain), np.full(n, wall), np.ones(n, bool), keep, x[keep],
-                      gap, n_out[keep], O.step.active_row[O.step.nodes[keep]],
-                      O.step.N[keep], none, np.zeros((n, width)),
+                      gap, n_out[keep], *edge_stencil(O.step, keep, support), none,
+                      np.zeros((n, width)),
                       -np.ones((n, 0), np.int64), np.zeros((n, 0, d)), n_out[keep]))
     return _concatenate(parts)
 
