@@ -172,7 +172,7 @@ def point_blocks(rows: np.ndarray, weights: np.ndarray, rate_rows: np.ndarray,
     """A point site's velocity as blocks: v = Σ_k w_k v_k, except along ``rate_normal`` n
     where a surface's exact normal velocity replaces it (where the site has rate rows):
     v = (I − n nᵀ) Σ_k w_k v_k + n Σ_k a_kᵀ v_k."""
-    n, d = rate_normal.shape
+    d = rate_normal.shape[1]
     has = (rate_rows >= 0).any(axis=1)
     proj = np.eye(d) - has[:, None, None] * np.einsum("si,sj->sij", rate_normal, rate_normal)
     sampled = weights[:, :, None, None] * proj[:, None]
@@ -215,6 +215,7 @@ def with_point_contacts(lattice: Lattice, steps: dict, nodal: ContactNodes, gaps
                   alone=np.where(np.isin(sc.beta, list(steps)),
                                  2 * sc.point + (~sc.owner_is_alpha), -1))
     no_rate = -np.ones_like(sc.rate_rows)
+    nodal_sides = nodal_stencils(steps, nodal)
     sides = []
     for which, (rows, weights) in enumerate(((sc.rows_alpha, sc.weights_alpha),
                                              (sc.rows_beta, sc.weights_beta))):
@@ -223,7 +224,7 @@ def with_point_contacts(lattice: Lattice, steps: dict, nodal: ContactNodes, gaps
         rate_rows = np.where(surface_side[:, None], sc.rate_rows, no_rate)
         patch_rows, patch_blocks = aggregate(found, *point_blocks(
             rows, weights, rate_rows, sc.rate_vec, sc.rate_normal))
-        at_nodes = nodal_stencils(steps, nodal)[which]
+        at_nodes = nodal_sides[which]
         width = max(patch_rows.shape[1], 1)
         padded_rows = -np.ones((len(nodal), width), np.int64)
         padded_rows[:, 0] = at_nodes.rows[:, 0]
