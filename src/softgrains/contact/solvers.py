@@ -19,7 +19,8 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   while the merit still falls: it stops only when ½‖Φ‖² has not fallen by 1% in
   STAGNATION_ITERATIONS). With friction it can stall or cycle (no global convergence for
   the non-associated Coulomb law): then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps
-  from its best iterate and, if they fail too and ``options.tresca`` allows it, the
+  from its best iterate, then the **proximal point** loop (W + εI, well posed where
+  redundant sites make W singular) and, if they fail too and ``options.tresca`` allows it, the
   **Tresca fixed point** — the friction bound s = μ P_n held, the Tresca problem
   (monotone for a symmetric PSD W) solved by the same Newton, s updated. Dimension-generic
   (the 3D cone's projection is exact).
@@ -54,6 +55,10 @@ STAGNATION_DECREASE = 0.99  # ... iterations by at least this factor
 TRESCA_ITERATIONS = 60  # friction-bound updates of the Tresca fixed point (a stalled Newton)
 TRESCA_TOLERANCE_FRACTION = 0.1  # each Tresca problem to this fraction of the tolerance
 TRESCA_STAGNATION = 5  # ... and it stops after this many updates without a better residual
+PROXIMAL_ITERATIONS = 100  # outer iterations of the proximal-point fallback (a stalled Newton)
+PROXIMAL_WEIGHT = 1e-3  # ε = this × the mean of W's diagonal (local frames)
+PROXIMAL_STAGNATION = 15  # ... it stops after this many outer iterations without a new best
+PROXIMAL_FAILED_INNER = 2  # ... or after this many regularised problems left unsolved
 
 
 @dataclass(frozen=True)
@@ -100,15 +105,23 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
         return result
     # the Alart–Curnier Newton has no global convergence with Coulomb friction (seen
     # stalling at 3e-2 on a frictional compaction step whose problem Gauss–Seidel solves in
-    # 540 sweeps): Gauss–Seidel from its best iterate (cheap sweeps), then the Tresca fixed
-    # point from the better of the two (redundant point contacts at quasi-static steps,
-    # where Gauss–Seidel stalls: cond(W) ~ 10¹¹)
+    # 540 sweeps): Gauss–Seidel from its best iterate (cheap sweeps)
     sweeps = _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
         "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor))
     result = _better(result, sweeps)
-    if result.converged or not options.tresca or not np.any(problem.mu > 0.0):
+    if result.converged:
         return result
-    return _better(result, _tresca_fixed_point(problem, result, options))
+    # a (nearly) singular W — contact sites that outnumber the velocity modes they sample,
+    # e.g. the points of a flat face against a wall — stalls both: the proximal point
+    # method solves a sequence of regularised problems W + εI, each well posed (from the
+    # initial guess: from the Newton's best iterate, where it may have been cycling, the
+    # regularised Newton was seen to stall too)
+    proximal = _proximal_point(problem, P, options)
+    if proximal.converged or not options.tresca or not np.any(problem.mu > 0.0):
+        return _better(result, proximal)
+    # then the Tresca fixed point from the better of Newton and Gauss–Seidel (redundant
+    # point contacts at quasi-static steps, where Gauss–Seidel stalls: cond(W) ~ 10¹¹)
+    return _better(_better(result, _tresca_fixed_point(problem, result, options)), proximal)
 
 
 def _better(first: ContactResult, second: ContactResult) -> ContactResult:
@@ -230,19 +243,51 @@ def _newton_step(lin: _Linearised, rho: np.ndarray, W: sp.csr_matrix) -> np.ndar
     return dr
 
 
+@dataclass(frozen=True)
+class _LocalOperator:
+    """The problem in its contacts' frames: w = q + W r (flat, (contact, component))."""
+
+    frames: np.ndarray
+    W: sp.csr_matrix
+    q: np.ndarray
+    rho: np.ndarray
+    movable: np.ndarray  # contacts some body can move at (W_cc,nn > 0)
+
+
+def _local_operator(problem: ContactProblem) -> _LocalOperator:
+    def compute():
+        frames = problem.frames()
+        T = _block_diagonal(frames)
+        Wcc_nn = np.einsum("ci,cij,cj->c", problem.normal, problem.diagonal_blocks(),
+                           problem.normal)
+        return _LocalOperator(frames, (T @ problem.delassus() @ T.T).tocsr(),
+                              to_local(frames, problem.free_velocity()).ravel(),
+                              normal_masses(problem), Wcc_nn > 0.0)
+    return problem._cached("local_operator", compute)
+
+
+@dataclass(frozen=True)
+class _Proximal:
+    """The proximal term of one outer iteration: w = q + W r + ε (r − r_k)."""
+
+    epsilon: float
+    centre: np.ndarray  # r_k, flat local impulses
+
+
 def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
-            threshold: np.ndarray | None = None) -> ContactResult:
+            threshold: np.ndarray | None = None, proximal: _Proximal | None = None
+            ) -> ContactResult:
     """Semismooth Newton on the Alart–Curnier function from P (Coulomb; with ``threshold``
-    the Tresca problem of that fixed friction bound, whose residual is then its own Φ)."""
+    the Tresca problem of that fixed friction bound; with ``proximal`` the regularised
+    problem w = q + (W + εI) r − ε r_k; in both cases the residual is its own Φ)."""
     n, d = problem.n_contacts, problem.dim
-    frames = problem.frames()
-    T = _block_diagonal(frames)
-    W = (T @ problem.delassus() @ T.T).tocsr()
-    q = to_local(frames, problem.free_velocity()).ravel()
-    Wcc_nn = np.einsum("ci,cij,cj->c", problem.normal, problem.diagonal_blocks(),
-                       problem.normal)
-    movable = Wcc_nn > 0.0
-    rho = normal_masses(problem)
+    op = _local_operator(problem)
+    frames, movable, rho = op.frames, op.movable, op.rho
+    W, q = op.W, op.q
+    if proximal is not None:
+        W = (W + proximal.epsilon * sp.identity(n * d, format="csr")).tocsr()
+        q = q - proximal.epsilon * proximal.centre
+    own_residual = threshold is not None or proximal is not None
     mu, bias = problem.mu, problem.bias
     r = to_local(frames, P).ravel()
     r[np.repeat(~movable, d)] = 0.0
@@ -253,9 +298,9 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
 
     def measure(r, u, lin):
         P, w = to_global(frames, r.reshape(n, d)), to_global(frames, u)
-        if threshold is None:
-            return residual_norm(problem, P, w, options.floor)
-        return relative_error(problem, lin.phi, P, w, options.floor)  # Tresca's own Φ
+        if own_residual:
+            return relative_error(problem, lin.phi, P, w, options.floor)
+        return residual_norm(problem, P, w, options.floor)
 
     u, lin = evaluate(r)
     merit = 0.5 * float(np.sum(lin.phi ** 2))
@@ -301,20 +346,65 @@ def _tresca_fixed_point(problem: ContactProblem, start: ContactResult,
     the current impulses held fixed, the problem (then monotone for a symmetric W) solved
     by the semismooth Newton, s updated, until the Coulomb residual meets the tolerance
     (a fixed point of s ↦ μ P_n(s) solves the Coulomb problem)."""
-    best, P = start, start.impulse
-    iterations, history, best_at = 0, [], 0
     inner = replace(options, tolerance=TRESCA_TOLERANCE_FRACTION * options.tolerance)
-    for _ in range(TRESCA_ITERATIONS):
+
+    def tresca(P):
         bound = problem.mu * np.maximum(np.einsum("ci,ci->c", P, problem.normal), 0.0)
-        tresca = _newton(problem, P, inner, threshold=bound)
-        iterations += tresca.iterations
-        P = tresca.impulse
+        return _newton(problem, P, inner, threshold=bound)
+
+    return _fixed_point(problem, start.impulse, start, options, tresca,
+                        TRESCA_ITERATIONS, TRESCA_STAGNATION)
+
+
+def _proximal_point(problem: ContactProblem, P: np.ndarray,
+                    options: ContactSolverOptions) -> ContactResult:
+    """The proximal point method: r_{k+1} solves the problem with w = q + W r + ε (r − r_k)
+    (W + εI is positive definite for a PSD W, and well conditioned where W is singular:
+    redundant contact sites), by the semismooth Newton; a fixed point r_{k+1} = r_k solves
+    the original problem. ε = PROXIMAL_WEIGHT × mean diag W: small enough that each outer
+    iteration moves far, large enough to fix the null directions. Measured on three
+    problems of per-point wall contacts (2026-12-03; one is tests/contact/data/
+    per_point_wall_sites.npz): 1e-6 in 50–106 Newton iterations in all (about 10–30 outer
+    ones), where the Newton and 500 Gauss–Seidel sweeps stopped at 1e-4. Starts from P;
+    returns its best iterate."""
+    op = _local_operator(problem)
+    epsilon = PROXIMAL_WEIGHT * float(op.W.diagonal().mean())
+    best = ContactResult(P, contact_status(problem, P), 0,
+                         residual_norm(problem, P, floor=options.floor), False)
+    if not epsilon > 0.0:
+        return best
+    inner = replace(options, tolerance=TRESCA_TOLERANCE_FRACTION * options.tolerance)
+
+    def regularised(P):
+        centre = to_local(op.frames, P).ravel()
+        return _newton(problem, P, inner, proximal=_Proximal(epsilon, centre))
+
+    # with friction the regularised Newton can cycle too: stop after a few such failures
+    return _fixed_point(problem, P, best, options, regularised, PROXIMAL_ITERATIONS,
+                        PROXIMAL_STAGNATION, PROXIMAL_FAILED_INNER)
+
+
+def _fixed_point(problem: ContactProblem, P: np.ndarray, best: ContactResult,
+                 options: ContactSolverOptions, update, max_updates: int, stagnation: int,
+                 failures: int | None = None) -> ContactResult:
+    """P ← update(P).impulse until the problem's residual meets the tolerance, or
+    ``stagnation`` updates pass without a better residual than ``best``'s, or ``failures``
+    updates are left unconverged (None: no limit); returns the best iterate."""
+    iterations, history, best_at, failed = 0, [], 0, 0
+    for k in range(1, max_updates + 1):
+        step = update(P)
+        iterations += step.iterations
+        failed += not step.converged
+        if not np.all(np.isfinite(step.impulse)) or (failures is not None
+                                                      and failed >= failures):
+            break
+        P = step.impulse
         residual = residual_norm(problem, P, floor=options.floor)
         history.append(residual)
         if residual < best.residual:
-            best = ContactResult(P, tresca.status, iterations, residual,
+            best = ContactResult(P, step.status, iterations, residual,
                                  residual <= options.tolerance)
-            best_at = len(history)
-        if residual <= options.tolerance or len(history) - best_at >= TRESCA_STAGNATION:
+            best_at = k
+        if residual <= options.tolerance or k - best_at >= stagnation:
             break
     return replace(best, iterations=iterations, history=history)
