@@ -1,22 +1,27 @@
 """Audit of per-point wall contacts: does a wall contact's next gap follow the constraint?
 
-    python benchmarks/wall_gap_audit.py RUN_DIR AUDIT_DIR [edge|noedge] [STEPS]
+    python benchmarks/wall_gap_audit.py RUN_DIR AUDIT_DIR [VARIANT] [STEPS]
 
-Copies RUN_DIR (the output folder of a run with a checkpoint, e.g. a compaction example run
-with wall_sites = "surface"), resumes it with one contact site per boundary point at walls
-(patches of one point; with "noedge" the force at the point instead of its cell edge) and,
-for STEPS steps, compares every grain–wall point contact's gap at step k + 1 with step k:
+Copies RUN_DIR (the output folder of a run with a checkpoint, e.g. a compaction example run),
+resumes it with ``contact.wall_sites = "points"`` (one contact site per grain point within
+reach of a wall) and, for STEPS steps, compares every grain–wall point contact's gap at step
+k + 1 with step k:
 
 - "deepened": a contact of step k whose gap fell by more than 0.02 h to below −0.05 h,
   printed with the contact solve's predicted end-of-step gap, the point's normal
   displacement n·Δx, the change of its cell support n·Δr and its linear prediction
   n·(ΔF F⁻¹ r) (what the edge stencil's rate assumes);
 - "new": a point already 0.02 h into the wall that was not a contact at step k, with its
-  gap and its own-surface distance at step k (points deeper than one point spacing
-  inside their own grain's kernel surface are not taken as contacts).
+  gap and its own-surface distance at step k.
+
+VARIANT (joined by "+"): "noedge" puts the force at the point instead of its cell edge;
+"square" takes the lattice square's corner as the cell support at walls (session 14's);
+"nodalwalls" keeps the case's wall sites (the default: nodes) and audits only the grain
+pairs' point contacts: per step, how many deepened (same rule) and the worst three.
 
 Session 14 (2026-12-03) found with it the two ways points got 0.5 h into the walls of the
-README main job; docs/dev-notes.md, "Contact, session 14".
+README main job (the square support's kink, and corner points beyond the outer-point
+threshold); session 15 checked the mends; docs/dev-notes.md, "Contact, session 14/15".
 """
 
 import shutil
@@ -29,13 +34,21 @@ import softgrains.contact.coupling as coupling
 import softgrains.contact.sites as sites
 import softgrains.contact.surfaces as surfaces
 
-_group = sites.group
-sites.group = lambda *a, alone=None, **k: _group(*a, alone=np.arange(alone.size) * 2, **k)
-if len(sys.argv) > 3 and sys.argv[3] == "noedge":
+VARIANT = set(sys.argv[3].split("+")) if len(sys.argv) > 3 else set()
+if "noedge" in VARIANT:
     surfaces.edge_stencil = lambda step, points, r: (step.active_row[step.nodes[points]],
                                                      step.N[points])
-_wall_contacts, _solve = surfaces.wall_contacts, coupling.solve
+if "square" in VARIANT:  # session 14's support: the lattice square's corner at walls
+    _support = surfaces.cell_support
+    surfaces.cell_support = lambda F, n, spacing, round_body: _support(F, n, spacing, False)
+_wall_contacts, _grain_contacts = surfaces.wall_contacts, surfaces.surface_contacts
+_solve = coupling.solve
 log = {}
+
+
+def traced_grain_contacts(*args, **kwargs):
+    log["grain_contacts"] = sc = _grain_contacts(*args, **kwargs)
+    return sc
 
 
 def traced_wall_contacts(pairs, steps, shapes, spacing, reach, round_bodies=frozenset()):
@@ -48,8 +61,7 @@ def traced_wall_contacts(pairs, steps, shapes, spacing, reach, round_bodies=froz
         near = np.flatnonzero(distance < reach + spacing)
         value, grad, _ = own.field(x[near])
         inside, _ = surfaces.calibrated_distance(value, grad, own.radius)
-        support = surfaces.cell_support(own.step.pts.F[near], n_out[near], spacing,
-                                        grain in round_bodies)
+        support = surfaces.cell_support(own.step.pts.F[near], n_out[near], spacing, True)
         gap = distance[near] + np.einsum("pi,pi->p", n_out[near], support)
         pairs_of = zip(gap.tolist(), inside.tolist(), strict=True)
         candidates[(grain, wall)] = dict(zip(near.tolist(), pairs_of, strict=True))
@@ -64,8 +76,66 @@ def traced_solve(problem, P, options):
 
 
 surfaces.wall_contacts = sites.wall_contacts = traced_wall_contacts
+surfaces.surface_contacts = sites.surface_contacts = traced_grain_contacts
 coupling.solve = traced_solve
 from softgrains import Simulation, load_case  # noqa: E402  (after the patches)
+
+
+def _gaps(sc, index, moved):
+    """Per contact key: its gap, normal and the end-of-step gap the solve's velocities gave."""
+    now, predicted, normal = {}, {}, {}
+    for a, b, own_a, p, x, g, n in zip(sc.alpha, sc.beta, sc.owner_is_alpha, sc.point,
+                                       sc.position, sc.gap, sc.normal, strict=True):
+        key = (int(a), int(b), int(p), bool(own_a))
+        now[key], normal[key] = g, n
+        c = index.get((key[0], key[1], tuple(np.round(x, 12))))
+        if c is not None:
+            predicted[key] = g + moved[c]
+    return now, predicted, normal
+
+
+def _report_walls(now, before, states, spacing, h):
+    gaps, predicted, normals, candidates = before
+    for key, g in now.items():
+        if key in gaps and g < -0.05 * h and g < gaps[key] - 0.02 * h:
+            a, _, p, _ = key
+            (X0, G0), (X1, G1) = states[a]
+            x0, F0, x1, F1 = X0[p], G0[p], X1[p], G1[p]
+            n = normals[key]
+            r0, r1 = (surfaces.cell_support(F[None], n[None], spacing, "square" not in VARIANT)
+                      [0] for F in (F0, F1))
+            linear = (F1 - F0) @ np.linalg.solve(F0, r0)
+            print(f"   deepened {key[:3]}: {gaps[key] / h:.3f} -> {g / h:.3f} h (solve "
+                  f"predicted {predicted.get(key, np.nan) / h:.3f}); "
+                  f"n.dx {n @ (x1 - x0) / h:.3f}, n.dr {n @ (r1 - r0) / h:.3f}, "
+                  f"linear n.dr {n @ linear / h:.3f} h; max|dF| {np.abs(F1 - F0).max():.2f}")
+        elif key not in gaps and g < -0.02 * h:
+            gap0, inside0 = candidates.get(key[:2], {}).get(key[2], (np.nan, np.nan))
+            print(f"   new {key[:3]}: {g / h:.3f} h; at step k gap {gap0 / h:.3f} h, "
+                  f"own-surface distance {inside0 / h:.3f} h")
+
+
+def _report_grains(now, before, states, spacing, h):
+    """Grain pairs' point contacts that deepened: the gap change, the solve's prediction,
+    the own point's motion along the surface normal n·Δx and the change of its cell's
+    extent e along n with the lattice square's support and with the round one."""
+    gaps, predicted, normals, _ = before
+    deepened = sorted((g - gaps[key], key, gaps[key], g) for key, g in now.items()
+                      if key in gaps and g < -0.05 * h and g < gaps[key] - 0.02 * h)
+    new = [g for key, g in now.items() if key not in gaps and g < -0.02 * h]
+    print(f"   grain contacts {len(now)}, least gap {min(now.values(), default=0) / h:.3f} h;"
+          f" deepened {len(deepened)}, new below -0.02 h {len(new)}"
+          + (f" (deepest new {min(new) / h:.3f} h)" if new else ""))
+    for _, key, g0, g in deepened[:3]:
+        a, b, p, own_alpha = key
+        (X0, G0), (X1, G1) = states[a if own_alpha else b]
+        n = normals[key] if own_alpha else -normals[key]  # out of the surface's body
+        extent = {round_: [-n @ surfaces.cell_support(F[None], n[None], spacing, round_)[0]
+                           for F in (G0[p], G1[p])] for round_ in (False, True)}
+        print(f"   deepened {key}: {g0 / h:.3f} -> {g / h:.3f} h (solve predicted "
+              f"{predicted.get(key, np.nan) / h:.3f}); own n.dx {n @ (X1[p] - X0[p]) / h:.3f}"
+              f", de square {np.diff(extent[False])[0] / h:.3f}, round "
+              f"{np.diff(extent[True])[0] / h:.3f} h")
 
 
 def main() -> None:
@@ -73,59 +143,42 @@ def main() -> None:
     n_steps = int(sys.argv[4]) if len(sys.argv) > 4 else 10
     shutil.rmtree(out, ignore_errors=True)
     shutil.copytree(src, out)
-    sim = Simulation(load_case(out / "case.toml"), out=out)
+    walls = [] if "nodalwalls" in VARIANT else ["contact.wall_sites=points"]
+    sim = Simulation(load_case(out / "case.toml", walls), out=out)
     sim.resume(out / "checkpoint.h5")
     h = sim.case.grid.cell_size
     spacing = h / sim.model.points_per_cell
-    round_bodies = {b.index for b in sim.model.bodies if b.seeding == "rings"}
-    previous = None
+    previous = {}
     for _ in range(n_steps):
         before = {b.index: (sim.state.x[b.points].copy(), sim.state.F[b.points].copy())
                   for b in sim.model.bodies if b.deformable}
+        log.clear()
         diag = sim.step()
-        sc, candidates = log["contacts"], log["candidates"]
         problem, result = log["problem"]
         dt = sim.case.simulation.dt * sim.dt_factor
-        w_n = np.einsum("ci,ci->c", problem.velocities(result.impulse), problem.normal)
+        moved = dt * np.einsum("ci,ci->c", problem.velocities(result.impulse), problem.normal)
         cs = sim.state.contacts
         index = {(int(a), int(b), tuple(np.round(x, 12))): c for c, (a, b, x) in enumerate(
             zip(cs.nodes.alpha, cs.nodes.beta, cs.nodes.position, strict=True))}
-        now, predicted, normal = {}, {}, {}
-        for a, b, p, x, g, n in zip(sc.alpha, sc.beta, sc.point, sc.position, sc.gap,
-                                    sc.normal, strict=True):
-            key = (int(a), int(b), int(p))
-            now[key], normal[key] = g, n
-            c = index.get((key[0], key[1], tuple(np.round(x, 12))))
-            if c is not None:
-                predicted[key] = g + dt * w_n[c]  # the gap the solve's velocities give
         print(f"step {sim.state.step}: coupling its {diag.contact.iterations}, residual "
-              f"{diag.contact.residual:.1e}; wall contacts {len(now)}, least gap "
-              f"{min(now.values()) / h:.3f} h", flush=True)
-        if previous is not None:
-            gaps, predicted_before, normals, candidates_before, states = previous
-            for key, g in now.items():
-                if key in gaps and g < -0.05 * h and g < gaps[key] - 0.02 * h:
-                    a, _, p = key
-                    (X0, G0), (X1, G1) = states[a]
-                    x0, F0, x1, F1 = X0[p], G0[p], X1[p], G1[p]
-                    n = normals[key]
-                    r0, r1 = (surfaces.cell_support(F[None], n[None], spacing,
-                                                    a in round_bodies)[0] for F in (F0, F1))
-                    linear = (F1 - F0) @ np.linalg.solve(F0, r0)
-                    print(f"   deepened {key}: {gaps[key] / h:.3f} -> {g / h:.3f} h (solve "
-                          f"predicted {predicted_before.get(key, np.nan) / h:.3f}); "
-                          f"n.dx {n @ (x1 - x0) / h:.3f}, n.dr {n @ (r1 - r0) / h:.3f}, "
-                          f"linear n.dr {n @ linear / h:.3f} h; max|dF| "
-                          f"{np.abs(F1 - F0).max():.2f}")
-                elif key not in gaps and g < -0.02 * h:
-                    gap0, inside0 = candidates_before.get(key[:2], {}).get(key[2],
-                                                                          (np.nan, np.nan))
-                    print(f"   new {key}: {g / h:.3f} h; at step k gap {gap0 / h:.3f} h, "
-                          f"own-surface distance {inside0 / h:.3f} h")
-        states_pair = {a: (before[a], (sim.state.x[sim.model.bodies[a].points].copy(),
-                                       sim.state.F[sim.model.bodies[a].points].copy()))
-                       for a in before}
-        previous = (now, predicted, normal, candidates, states_pair)
+              f"{diag.contact.residual:.1e}", flush=True)
+        states = {a: (before[a], (sim.state.x[sim.model.bodies[a].points].copy(),
+                                  sim.state.F[sim.model.bodies[a].points].copy()))
+                  for a in before}
+        current = {"states": states}
+        if "contacts" in log:
+            current["walls"] = (*_gaps(log["contacts"], index, moved), log["candidates"])
+            now = current["walls"][0]
+            print(f"   wall contacts {len(now)}, least gap {min(now.values()) / h:.3f} h")
+            if "walls" in previous:  # the motion of the previous step
+                _report_walls(now, previous["walls"], previous["states"], spacing, h)
+        if "grain_contacts" in log:
+            current["grains"] = (*_gaps(log["grain_contacts"], index, moved), None)
+            if "grains" in previous:
+                _report_grains(current["grains"][0], previous["grains"], previous["states"],
+                               spacing, h)
+        previous = current
+        sys.stdout.flush()
 
 
 if __name__ == "__main__":

@@ -76,7 +76,7 @@ def test_without_contact_the_disks_pass_through_each_other():
     assert np.allclose(sim.state.v[sim.model.bodies[0].points].mean(axis=0), [0.1, 0.1])
 
 
-@pytest.mark.parametrize("wall_sites", ["nodes", "surface"])
+@pytest.mark.parametrize("wall_sites", ["nodes", "surface", "points"])
 def test_block_resting_on_a_wall_reports_a_constant_force_mg(wall_sites):
     """An elastic block released just above a kinematic slab under gravity (θ = 1): once
     settled, the slab pushes it with m g within 1% at every step (no chatter between 2mg
@@ -124,8 +124,8 @@ def test_block_on_an_incline_slides_with_the_coulomb_acceleration(mu, expected, 
 
 
 @pytest.mark.parametrize("gap, wall_sites", [(True, "nodes"), (False, "nodes"),
-                                             (True, "surface")],
-                         ids=["gap", "mass-overlap", "surface"])
+                                             (True, "surface"), (True, "points")],
+                         ids=["gap", "mass-overlap", "surface", "points"])
 def test_resting_block_boundary_gap(gap, wall_sites):
     """ALGORITHM.md §4: a block released 0.4 h above a slab (h = 0.05) comes to rest with its
     boundary (lowest points − δ/2) within 0.05 h of the slab with the gap treatment; on mass

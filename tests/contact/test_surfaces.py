@@ -6,6 +6,7 @@ import pytest
 
 from softgrains import Simulation, load_case
 from softgrains.contact import surfaces
+from softgrains.geometry import Rectangle
 from softgrains.integrator.implicit import BodyStep
 
 H = 0.1
@@ -157,3 +158,29 @@ def test_own_side_velocity_is_the_rate_of_the_cell_edge(shape_function, round_bo
     nodes = step.stepper.lattice.node_positions(step.box)[step.active]
     Xp = np.where(rows[:, :, None] >= 0, nodes[rows], 0.0)
     assert np.allclose(np.einsum("pk,pkj->pj", w, Xp), step.pts.x[points] + r, atol=1e-12)
+
+
+def test_wall_contacts_take_every_point_within_reach_with_a_smooth_cell_extent():
+    """Grain–wall point contacts (``wall_sites = "points"``): the block's lattice points
+    above a kinematic slab whose face is the block's lower edge. (1) Every point within
+    reach is a contact, the second row (1.5 point spacings inside the grain) too: with the
+    grain pairs' outer-point threshold, compressed corner points read deeper than one
+    spacing inside their grain, left the contact set and entered the walls unconstrained
+    (session 15). (2) The gap's cell extent e = ½δ‖Fᵀn‖ is smooth where the cell's edge
+    is parallel to the wall: a shear F = I + γ e_y⊗e_x changes the gap by ½δ(√(1 + γ²) − 1)
+    (second order); the lattice square's corner support, ½δ Σ_j |(Fᵀn)_j|, changed it by
+    ½δ|γ| (first order, its kink), and the edge stencil's linear rate then let the solve
+    meet the constraint by shearing the point's cell (session 14)."""
+    step = _body_step("linear", BLOCK)
+    slab = Rectangle(lower=(0.0, 0.3), upper=(2.0, 0.5))
+    spacing, reach = H / 2, H
+    gaps = []
+    for gamma in (0.0, 0.1):
+        step.pts.F[:] = [[1.0, 0.0], [gamma, 1.0]]
+        found = surfaces.wall_contacts([(0, 1)], {0: step}, {1: slab}, spacing, reach)
+        gaps.append(found.gap)
+    height = found.position[:, 1] - 0.5
+    rows = np.unique(np.round(height / spacing, 9))
+    assert rows[0] == 0.5 and rows[1] == 1.5 and np.all(found.gap < reach)
+    assert np.allclose(found.gap, height - 0.5 * spacing * np.sqrt(1.0 + 0.1**2))
+    assert np.abs(gaps[1] - gaps[0]).max() < 0.01 * spacing  # ½δ γ²/2 = 0.0025 δ

@@ -297,6 +297,13 @@ class ContactSettings(_Section):
         "the step closed (gap 0: the integrator's end-of-step prediction) unless the fresh "
         "estimate says the bodies overlap, so that the estimate's scatter cannot ratchet "
         "loaded bodies into each other (opt-in while it is measured: docs/dev-notes.md)")
+    end_gap_check: bool = Field(
+        False, description="after each converged step, the point contacts' gaps evaluated "
+        "at the end of the step (points and surfaces moved): where the linearised gap "
+        "missed an overlap below min(start gap, -0.025 h), the constraint is corrected and "
+        "the step solved again (at most 3 times). Holds the linearisation's errors from "
+        "adding up; each correction does work in the energy bookkeeping (opt-in while it "
+        "is measured: docs/dev-notes.md, session 15)")
     overlap_removal: float = Field(
         0.0, ge=0.0, le=1.0, description="fraction of an estimated overlap between two "
         "bodies removed per step (0: overlaps are only kept from growing)")
@@ -310,12 +317,13 @@ class ContactSettings(_Section):
         "surface", description="where two grains' contacts act: at each grain's outer "
         "points against the other's kernel-smoothed surface (two passes), or at the nodes "
         "they share (the contact of sessions 1-10, which lets loaded grains into each other)")
-    wall_sites: Literal["nodes", "surface"] = Field(
+    wall_sites: Literal["nodes", "surface", "points"] = Field(
         "nodes", description="where a grain's contacts with a kinematic rectangle or disk "
-        "act: at the nodes they share (exact face normals), or at the grain's outer points "
-        "against the wall's exact face, grouped in patches of about h (opt-in: passes the "
-        "quasi-static squeeze, but in the compaction lets points ~0.45 h into the walls "
-        "and costs 2x; docs/dev-notes.md)")
+        "act: at the nodes they share (exact face normals); at each of the grain's points "
+        "within reach against the wall's exact face, the force at the edge of the point's "
+        "cell (\"points\"); or the same points grouped in patches of about h "
+        "(\"surface\", cheaper, but the patch's mean constrains the patch, not each "
+        "point); docs/dev-notes.md")
     local_relation: Literal["delassus", "lumped"] = Field(
         "delassus", description="local compliance: Delassus (bodies' Newton matrices) or "
         "lumped nodal masses")

@@ -17,7 +17,14 @@ step of the bodies with a complete solve of the contact problem.
             solved completely (solvers.py: semismooth Newton by default)
         each body: the combined step du + X ΔQ = −A⁻¹ R(u; P_new) through the line search
     until the contacts' complementarity (natural-map) residual ≤ tol and every body's
-    residual ≤ tol × the largest impulse
+    residual ≤ tol × the largest impulse; then (``end_gap_check``, opt-in) the point
+    contacts' true end-of-step gaps g⁺ (end_gaps.py: points and surfaces moved by the
+    step's u): where g⁺ is an overlap below its floor (its start gap, and at least
+    −GAP_OVERLAP h), the constraint is moved by the error e = g⁺ − g_lin, re-evaluated
+    after each solve (a fixed point on the nonlinear gap), and the loop goes on (at most
+    GAP_UPDATES times a step). Without it the linearisation's second-order errors
+    (0.02–0.1 h at a contact, a few a step in the dense compaction) stay as overlaps and
+    add up (session 15)
 
 Kinematic bodies take no impulse response (W = 0): their nodal velocity is their prescribed
 velocity. With ``tangent = "auto"`` the bodies switch to the projected tangent within a
@@ -37,6 +44,7 @@ from softgrains.contact.detection import (
     find_contact_nodes,
     node_position,
 )
+from softgrains.contact.end_gaps import end_gaps
 from softgrains.contact.gap import (
     boundary_gaps,
     effective_gaps,
@@ -53,6 +61,7 @@ from softgrains.contact.problem import (
 )
 from softgrains.contact.sites import Slots, point_contacts, subset, with_point_contacts
 from softgrains.contact.solvers import ContactSolverOptions, solve
+from softgrains.contact.surfaces import select
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
 
@@ -60,6 +69,13 @@ IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
 AUTO_TANGENT_ITERATIONS = 10  # tangent = "auto": projected after this many iterations
 AUTO_TANGENT_FAILED_SOLVES = 2  # ... or after this many unconverged contact solves
 SOLVE_TOLERANCE_FRACTION = 0.1  # each contact solve to this fraction of the loop's tolerance
+# the end-of-step gap check (end_gaps.py): a point contact whose true end gap would pass
+# below its floor, min(its start gap, −GAP_OVERLAP h), by GAP_ERROR h or more has its
+# constraint corrected by the difference and the step solved again (a fixed point on the
+# nonlinear gap, at most GAP_UPDATES times a step). The floor at half the issue's 0.05 h
+# bar leaves the linearisation's small errors alone: each correction does work P·o in the
+# bookkeeping (the force acts along the start-of-step normal while the true gap stays)
+GAP_OVERLAP, GAP_ERROR, GAP_UPDATES = 0.025, 0.002, 3
 
 
 @dataclass(frozen=True)
@@ -76,10 +92,11 @@ class CouplingSettings:
     overlap_removal: float = 0.0  # fraction of an estimated overlap removed per step
     overlap_tolerance: float = 0.0  # overlap (in cells h) left alone by the removal
     keep_closed: bool = False  # a contact loaded at the previous step starts closed (g ≤ 0)
+    end_gap_check: bool = False  # correct the point contacts by their true end-of-step gaps
     solver: str = "newton"  # contact problem solver: newton | nsgs (solvers.py)
     solver_iterations: int = 50  # per contact solve: Newton iterations or NSGS sweeps
     grain_sites: str = "surface"  # grain–grain contacts at outer points, or at shared nodes
-    wall_sites: str = "nodes"  # grain–wall contacts at shared nodes, or at outer points
+    wall_sites: str = "nodes"  # grain–wall contacts at shared nodes, patches or points
 
 
 @dataclass
@@ -96,6 +113,7 @@ class ContactDiagnostics:
     problem: ContactProblem | None = None  # the last iteration's, kept when not converged
     wall_work: float = 0.0  # work of the kinematic walls' contact forces over the step
     dissipation: float = 0.0  # energy the contacts took out of the bodies over the step
+    gap_updates: int = 0  # constraints corrected by the true end-of-step gaps (end_gaps.py)
 
 
 @dataclass
@@ -148,12 +166,13 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     contacts = subset(contacts, usable)
     d = lattice.dim
     gaps = np.zeros(len(contacts))
-    stencils, points, reported = None, None, None
-    if gap_points is not None and len(contacts) and "surface" in (settings.grain_sites,
-                                                                  settings.wall_sites):
+    stencils, points, reported, point_contact = None, None, None, None
+    walls_at_points = settings.wall_sites in ("surface", "points")
+    if gap_points is not None and len(contacts) and (settings.grain_sites == "surface"
+                                                     or walls_at_points):
         # the pairs taken at points leave the nodal set before its gaps are estimated
         contacts, points = point_contacts(
-            lattice, steps, walls if settings.wall_sites == "surface" else {}, contacts,
+            lattice, steps, walls if walls_at_points else {}, contacts,
             spacing, reach, round_bodies, settings.grain_sites == "surface")
         gaps = np.zeros(len(contacts))
     if gap_points is not None and len(contacts):
@@ -164,8 +183,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                                              at_wall))
         gaps = boundary_gaps(lattice, contacts, gap_points, spacing, reach, round_bodies, near)
     if points is not None:
-        contacts, gaps, reported, stencils = with_point_contacts(lattice, steps, contacts,
-                                                                 gaps, points)
+        contacts, gaps, reported, stencils, point_contact = with_point_contacts(
+            lattice, steps, contacts, gaps, points, settings.wall_sites == "points")
     n = len(contacts)
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)
@@ -204,8 +223,15 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     if settings.keep_closed:
         gaps = np.where(np.any(P != 0.0, axis=1), np.minimum(gaps, 0.0), gaps)
     predicted = gaps + (1.0 - theta) * dt * start
-    bias = effective_gaps(predicted, settings.overlap_removal,
-                          settings.overlap_tolerance * lattice.h) / (theta * dt)
+    held = effective_gaps(predicted, settings.overlap_removal,
+                          settings.overlap_tolerance * lattice.h)
+    bias = held / (theta * dt)
+    end_gap_offset = np.zeros(n)  # the end-of-step gaps' linearisation errors (end_gaps.py)
+    corrected = np.zeros(n, bool)  # the contacts whose constraint carries that error
+    # the linear constraint holds g_lin ≥ predicted − held; the true end gap's floor is
+    # min(predicted, −GAP_OVERLAP h): an overlap may not deepen, nor pass GAP_OVERLAP h
+    slack = np.maximum(predicted - held - np.minimum(predicted, -GAP_OVERLAP * lattice.h),
+                       0.0)
 
     scale = 0.0
     for slot, body in enumerate(slots.bodies):
@@ -279,7 +305,24 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         done = {i: b.converged(limit=False, floor=p_scale * b.impulse_weight)
                 for i, b in steps.items()}
         if diag.residual <= settings.tolerance and all(done.values()):
-            break
+            if (points is None or not settings.end_gap_check
+                    or diag.gap_updates >= GAP_UPDATES):
+                break
+            # the constraint is on the true end-of-step gap: where the linearised one
+            # missed an overlap, correct the constraint by the error and solve again
+            linear = predicted + theta * dt * np.einsum(
+                "ci,ci->c", actual, contacts.normal)
+            new, offset = _end_gap_offsets(
+                lambda: end_gaps(select(points, point_contact >= 0), steps, walls, spacing,
+                                 dt, round_bodies),
+                point_contact[point_contact >= 0], linear, slack, corrected, lattice.h)
+            if not new.any() and np.abs(offset - end_gap_offset).max(
+                    initial=0.0) < GAP_ERROR * lattice.h:
+                break
+            corrected |= new
+            end_gap_offset = offset
+            bias = (held + end_gap_offset) / (theta * dt)
+            diag.gap_updates += 1
     else:
         diag.converged = False
         phi = np.linalg.norm(natural_map_residual(problem, P, actual), axis=1)
@@ -310,6 +353,22 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))
     return ContactState(contacts, P, status, estimated), diag
+
+
+def _end_gap_offsets(true_end_gaps: Callable[[], np.ndarray], lone: np.ndarray,
+                     linear: np.ndarray, slack: np.ndarray, corrected: np.ndarray,
+                     h: float) -> tuple[np.ndarray, np.ndarray]:
+    """The offsets o = min(e + s, 0) of the constraints from the error e = g⁺ − g_lin of
+    the linearised end-of-step gap g_lin (``linear``) against the true one g⁺ (of the
+    contacts ``lone``: ``true_end_gaps()``, end_gaps.py) and the ``slack`` s between what
+    the linear constraint holds and the true gap's floor; at the contacts already
+    ``corrected`` in this step and at those where o < −GAP_ERROR h (``new``), 0 elsewhere.
+    Returns (new, o)."""
+    error = np.zeros(linear.size)
+    error[lone] = np.nan_to_num(true_end_gaps() - linear[lone])
+    offset = np.minimum(error + slack, 0.0)
+    new = ~corrected & (offset < -GAP_ERROR * h)
+    return new, np.where(corrected | new, offset, 0.0)
 
 
 def _predicted_velocity(step, rows: np.ndarray, du: np.ndarray | None) -> np.ndarray:

@@ -204,16 +204,20 @@ def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: Contact
 
 
 def with_point_contacts(lattice: Lattice, steps: dict, nodal: ContactNodes, gaps: np.ndarray,
-                        sc: SurfaceContacts) -> tuple[ContactNodes, np.ndarray, np.ndarray,
-                                                      tuple[SideStencils, SideStencils]]:
+                        sc: SurfaceContacts, walls_per_point: bool = False
+                        ) -> tuple[ContactNodes, np.ndarray, np.ndarray,
+                                   tuple[SideStencils, SideStencils], np.ndarray]:
     """The nodal contacts (with their ``gaps``) and the point contacts ``sc``, grouped into
-    patches (patches.py), as one set: the contacts, their gaps, the gaps to report (a
-    patch's least member gap) and both sides' stencils (padded to a common width)."""
+    patches (patches.py; a point contact between grains, and with ``walls_per_point`` one
+    against a wall too, is a patch of its own), as one set: the contacts, their gaps, the
+    gaps to report (a patch's least member gap), both sides' stencils (padded to a
+    common width) and, per point contact, its contact's index if it is a patch of its own
+    (−1 for a member of a larger patch)."""
     d = lattice.dim
+    alone = np.isin(sc.beta, list(steps)) | walls_per_point
     found = group(sc.alpha, sc.beta, sc.position, sc.normal, sc.gap, lattice.node_origin,
                   lattice.h, lattice.n_nodes,
-                  alone=np.where(np.isin(sc.beta, list(steps)),
-                                 2 * sc.point + (~sc.owner_is_alpha), -1))
+                  alone=np.where(alone, 2 * sc.point + (~sc.owner_is_alpha), -1))
     no_rate = -np.ones_like(sc.rate_rows)
     nodal_sides = nodal_stencils(steps, nodal)
     sides = []
@@ -240,5 +244,6 @@ def with_point_contacts(lattice: Lattice, steps: dict, nodal: ContactNodes, gaps
         np.r_[nodal.local_alpha, none], np.r_[nodal.local_beta, none],
         np.r_[np.full(len(nodal), -1), found.site],
         np.r_[node_position(lattice, nodal.node), found.position])
+    lone = found.site[found.of_point] != -2
     return (merged, np.r_[gaps, found.gap], np.r_[gaps, found.least_gap],
-            (sides[0], sides[1]))
+            (sides[0], sides[1]), np.where(lone, len(nodal) + found.of_point, -1))

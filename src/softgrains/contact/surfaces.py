@@ -11,7 +11,8 @@ distance to it (> 0 outside) is read through the profile of a flat boundary, c =
                                   for lattice points; −(c − ½)/‖∇c‖ errs by 0.4 h at 0.5 h).
 
 A contact is taken at every point p of the outer layer of a grain O (d_O(x_p) > −δ, δ the
-point spacing) that lies within T's kernel reach, for both orders of a pair (two passes).
+point spacing) that lies within T's kernel reach, for both orders of a pair (two passes);
+against a kinematic wall at every point within reach (``wall_contacts``).
 Its gap is the distance from T's surface to the edge of p's deformed cell, per unit of its
 rate,
     g_p = (d_T(x_p) − e_p)/λ,   e_p = −n_T·r_p,   r_p = −½δ F_p sign(F_pᵀ n_T)
@@ -23,7 +24,8 @@ and its normal rate is taken from both bodies' nodal velocities:
     a_J = Σ_q V_q [−∇W(x − x_q) N_J(x_q) + W(x − x_q) ∇N_J(x_q)]
 (p moving with Σ_I N_I v_I and its cell with Ḟ = ∇v F; T's points moving with ẋ_q =
 Σ_J N_J(x_q) v_J, their volumes with V̇_q = V_q ∇·v; Σ_J a_J = −∇c, so momentum is
-exchanged exactly). Against a wall the own side's velocity is that of p's cell edge,
+exchanged exactly). Against a wall the cell is the round one for every grain, and the own
+side's velocity is that of p's cell edge,
 v_O(x_p + r_p) (session 13: with p's own velocity the edge's motion was left out of the
 rate and the force acted h/4 inside the grain, so the wall's force had the wrong lever arm:
 the small compaction's volume-averaged stress came out 7.9% below the wall's, 2.8% with
@@ -394,20 +396,25 @@ def shape_distance(shape, x: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None
 
 def wall_contacts(pairs: list[tuple[int, int]], steps: dict, shapes: dict, spacing: float,
                   reach: float, round_bodies=frozenset()) -> SurfaceContacts:
-    """Every (grain, wall) pair: the grain's outer points against the kinematic wall's exact
-    surface (gap d_wall(x_p) − e_p, normal the wall's outward normal, the wall's velocity
-    prescribed). The grain is α, the wall β."""
+    """Every (grain, wall) pair: the grain's points within reach against the kinematic
+    wall's exact surface (gap d_wall(x_p) − e_p, normal the wall's outward normal, the
+    wall's velocity prescribed). The grain is α, the wall β.
+
+    Every point within reach is a contact, not only the outer layer of the grain (interior
+    points are open contacts): with the outer-point threshold of the grain pairs, compressed
+    corner points read 0.50–0.57 h inside their grain's kernel surface, left the contact
+    set and entered the wall unconstrained (session 15). The cell support is the round one,
+    e = ½δ‖Fᵀn‖, for every grain: the lattice square's e = ½δ Σ_j |(Fᵀn)_j| has its kink
+    exactly against an axis-aligned wall, where the edge stencil's linear rate let the solve
+    meet the constraint by shearing the point's cell (|ΔF| up to 0.74 a step) while the
+    real e grew (session 14, ``benchmarks/wall_gap_audit.py``)."""
     parts = []
     for grain, wall in pairs:
         O = KernelSurface(steps[grain])
         x = O.step.pts.x
         distance, n_out = shape_distance(shapes[wall], x)
-        near = np.flatnonzero(distance < reach + spacing)
-        value, grad, _ = O.field(x[near])
-        own_distance, _ = calibrated_distance(value, grad, O.radius)
-        keep = near[own_distance > -spacing]
-        support = cell_support(O.step.pts.F[keep], n_out[keep], spacing,
-                               grain in round_bodies)
+        keep = np.flatnonzero(distance < reach + spacing)
+        support = cell_support(O.step.pts.F[keep], n_out[keep], spacing, True)
         gap = distance[keep] + np.einsum("pi,pi->p", n_out[keep], support)
         keep, gap, support = keep[gap < reach], gap[gap < reach], support[gap < reach]
         n, d = keep.size, x.shape[1]
@@ -418,6 +425,11 @@ def wall_contacts(pairs: list[tuple[int, int]], steps: dict, shapes: dict, spaci
                       np.zeros((n, width)),
                       -np.ones((n, 0), np.int64), np.zeros((n, 0, d)), n_out[keep]))
     return _concatenate(parts)
+
+
+def select(sc: SurfaceContacts, which: np.ndarray) -> SurfaceContacts:
+    """The contacts of ``sc`` picked by ``which`` (a mask or indices)."""
+    return SurfaceContacts(*(getattr(sc, f.name)[which] for f in fields(sc)))
 
 
 def merge(found: list[SurfaceContacts]) -> SurfaceContacts:

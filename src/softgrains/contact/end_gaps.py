@@ -1,0 +1,75 @@
+"""The gaps of the point contacts in the configuration at the end of the step (issue #11).
+
+The coupling loop holds each point contact's end-of-step gap through its linearisation,
+    g_lin = g + Δt[(1 − θ) w_n^n + θ w_n^{n+1}],
+with g, the normal and the cell's extent taken at the start of the step. Over one step the
+true gap differs from it at second order in the motion: the kernel surface of the other
+grain curves and moves with its points, the normal turns, the cell's extent changes with
+F. Those errors are 0.02–0.1 h at a few contacts a step in the dense compaction, and an
+overlap that is not removed (removal off) keeps them: they add up, a ratchet (session 15,
+``benchmarks/wall_gap_audit.py``). This module evaluates the gaps at the points' end
+positions, with the same geometry as surfaces.py:
+
+    x_p⁺ = x_p + Σ_I N_I(x_p) u_I,  F_p⁺ = (I + Σ_I u_I ⊗ ∇N_I(x_p)) F_p,  V_p⁺ = det(…) V_p,
+    wall: g⁺ = d_wall⁺(x_p⁺) − e_p⁺ (the wall moved by Δt v_wall),
+    grain pair: g⁺ = (d_T⁺(x_p⁺) − e_p⁺)/λ⁺ (T's kernel surface from T's moved points),
+
+with u the bodies' current displacement (what G2P would apply); coupling.py corrects the
+constraint by the difference g⁺ − g_lin and solves again.
+"""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from softgrains.contact.surfaces import (
+    KernelSurface,
+    SurfaceContacts,
+    calibrated_distance,
+    cell_support,
+    shape_distance,
+)
+from softgrains.geometry.shapes import translated
+
+
+def moved_points(step) -> SimpleNamespace:
+    """A body's points as the step's current displacement u would leave them: x⁺, F⁺, V⁺
+    (the G2P update of x, F and V, without the velocities)."""
+    rows = step.active_row[step.nodes]
+    U = np.where(rows[..., None] >= 0, step.u[np.maximum(rows, 0)], 0.0)  # (n, s^d, d)
+    d = U.shape[2]
+    increment = np.eye(d) + np.einsum("pki,pkj->pij", U, step.dN)
+    return SimpleNamespace(x=step.pts.x + np.einsum("pk,pki->pi", step.N, U),
+                           F=increment @ step.pts.F,
+                           vol=step.pts.vol * np.linalg.det(increment))
+
+
+def end_gaps(sc: SurfaceContacts, steps: dict, walls: dict, spacing: float, dt: float,
+             round_bodies=frozenset()) -> np.ndarray:
+    """Each point contact's gap at the end of the step (see the module docstring); NaN
+    where the point has left the other body's kernel reach."""
+    moved = {b: moved_points(steps[b]) for b in set(sc.alpha.tolist()) | set(sc.beta.tolist())
+             if b in steps}
+    gap = np.full(len(sc.gap), np.nan)
+    own = np.where(sc.owner_is_alpha, sc.alpha, sc.beta)
+    other = np.where(sc.owner_is_alpha, sc.beta, sc.alpha)
+    for o, t in sorted(set(zip(own.tolist(), other.tolist(), strict=True))):
+        which = np.flatnonzero((own == o) & (other == t))
+        pts = moved[o]
+        x, F = pts.x[sc.point[which]], pts.F[sc.point[which]]
+        if t in steps:  # T's kernel surface, from its moved points
+            surface = KernelSurface(SimpleNamespace(pts=moved[t], stepper=steps[t].stepper))
+            c, grad, _ = surface.field(x)
+            distance, lam = calibrated_distance(c, grad, surface.radius)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                n_out = -grad / np.linalg.norm(grad, axis=1)[:, None]
+                support = cell_support(F, n_out, spacing, o in round_bodies)
+                gap[which] = (distance + np.einsum("pi,pi->p", n_out, support)) / lam
+        else:  # a kinematic wall, moved by Δt v
+            velocity, shape = walls[t]
+            distance, n_out = shape_distance(translated(shape, dt * np.asarray(velocity)), x)
+            support = cell_support(F, n_out, spacing, True)
+            gap[which] = distance + np.einsum("pi,pi->p", n_out, support)
+    return gap
