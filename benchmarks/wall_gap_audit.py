@@ -51,8 +51,8 @@ def traced_grain_contacts(*args, **kwargs):
     return sc
 
 
-def traced_wall_contacts(pairs, steps, shapes, spacing, reach, round_bodies=frozenset()):
-    sc = _wall_contacts(pairs, steps, shapes, spacing, reach, round_bodies)
+def traced_wall_contacts(pairs, steps, shapes, spacing, reach):
+    sc = _wall_contacts(pairs, steps, shapes, spacing, reach)
     candidates = {}  # every point within reach: (gap, own-surface distance)
     for grain, wall in pairs:
         own = surfaces.KernelSurface(steps[grain])
@@ -61,8 +61,8 @@ def traced_wall_contacts(pairs, steps, shapes, spacing, reach, round_bodies=froz
         near = np.flatnonzero(distance < reach + spacing)
         value, grad, _ = own.field(x[near])
         inside, _ = surfaces.calibrated_distance(value, grad, own.radius)
-        support = surfaces.cell_support(own.step.pts.F[near], n_out[near], spacing, True)
-        gap = distance[near] + np.einsum("pi,pi->p", n_out[near], support)
+        gap, _ = surfaces.edge_gap(distance[near], n_out[near], own.step.pts.F[near],
+                                   spacing, "square" not in VARIANT)
         pairs_of = zip(gap.tolist(), inside.tolist(), strict=True)
         candidates[(grain, wall)] = dict(zip(near.tolist(), pairs_of, strict=True))
     log["contacts"], log["candidates"] = sc, candidates

@@ -312,10 +312,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # missed an overlap, correct the constraint by the error and solve again
             linear = predicted + theta * dt * np.einsum(
                 "ci,ci->c", actual, contacts.normal)
-            new, offset = _end_gap_offsets(
-                lambda: end_gaps(select(points, point_contact >= 0), steps, walls, spacing,
-                                 dt, round_bodies),
-                point_contact[point_contact >= 0], linear, slack, corrected, lattice.h)
+            lone = point_contact >= 0
+            true = end_gaps(select(points, lone), steps, walls, spacing, dt, round_bodies)
+            new, offset = _end_gap_offsets(true, point_contact[lone], linear, slack,
+                                           corrected, lattice.h)
             if not new.any() and np.abs(offset - end_gap_offset).max(
                     initial=0.0) < GAP_ERROR * lattice.h:
                 break
@@ -355,17 +355,17 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     return ContactState(contacts, P, status, estimated), diag
 
 
-def _end_gap_offsets(true_end_gaps: Callable[[], np.ndarray], lone: np.ndarray,
-                     linear: np.ndarray, slack: np.ndarray, corrected: np.ndarray,
-                     h: float) -> tuple[np.ndarray, np.ndarray]:
+def _end_gap_offsets(true: np.ndarray, lone: np.ndarray, linear: np.ndarray,
+                     slack: np.ndarray, corrected: np.ndarray, h: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
     """The offsets o = min(e + s, 0) of the constraints from the error e = g⁺ − g_lin of
-    the linearised end-of-step gap g_lin (``linear``) against the true one g⁺ (of the
-    contacts ``lone``: ``true_end_gaps()``, end_gaps.py) and the ``slack`` s between what
+    the linearised end-of-step gap g_lin (``linear``) against the true one g⁺ (``true``,
+    end_gaps.py, of the contacts ``lone``) and the ``slack`` s between what
     the linear constraint holds and the true gap's floor; at the contacts already
     ``corrected`` in this step and at those where o < −GAP_ERROR h (``new``), 0 elsewhere.
     Returns (new, o)."""
     error = np.zeros(linear.size)
-    error[lone] = np.nan_to_num(true_end_gaps() - linear[lone])
+    error[lone] = np.nan_to_num(true - linear[lone])
     offset = np.minimum(error + slack, 0.0)
     new = ~corrected & (offset < -GAP_ERROR * h)
     return new, np.where(corrected | new, offset, 0.0)

@@ -28,7 +28,7 @@ from softgrains.contact.surfaces import (
     KernelSurface,
     SurfaceContacts,
     calibrated_distance,
-    cell_support,
+    edge_gap,
     shape_distance,
 )
 from softgrains.geometry.shapes import translated
@@ -52,6 +52,7 @@ def end_gaps(sc: SurfaceContacts, steps: dict, walls: dict, spacing: float, dt: 
     where the point has left the other body's kernel reach."""
     moved = {b: moved_points(steps[b]) for b in set(sc.alpha.tolist()) | set(sc.beta.tolist())
              if b in steps}
+    surfaces = {}  # each grain's kernel surface from its moved points, built once
     gap = np.full(len(sc.gap), np.nan)
     own = np.where(sc.owner_is_alpha, sc.alpha, sc.beta)
     other = np.where(sc.owner_is_alpha, sc.beta, sc.alpha)
@@ -60,16 +61,16 @@ def end_gaps(sc: SurfaceContacts, steps: dict, walls: dict, spacing: float, dt: 
         pts = moved[o]
         x, F = pts.x[sc.point[which]], pts.F[sc.point[which]]
         if t in steps:  # T's kernel surface, from its moved points
-            surface = KernelSurface(SimpleNamespace(pts=moved[t], stepper=steps[t].stepper))
-            c, grad, _ = surface.field(x)
-            distance, lam = calibrated_distance(c, grad, surface.radius)
+            if t not in surfaces:
+                surfaces[t] = KernelSurface(SimpleNamespace(pts=moved[t],
+                                                            stepper=steps[t].stepper))
+            c, grad, _ = surfaces[t].field(x)
+            distance, lam = calibrated_distance(c, grad, surfaces[t].radius)
             with np.errstate(divide="ignore", invalid="ignore"):
                 n_out = -grad / np.linalg.norm(grad, axis=1)[:, None]
-                support = cell_support(F, n_out, spacing, o in round_bodies)
-                gap[which] = (distance + np.einsum("pi,pi->p", n_out, support)) / lam
+                gap[which] = edge_gap(distance, n_out, F, spacing, o in round_bodies)[0] / lam
         else:  # a kinematic wall, moved by Δt v
             velocity, shape = walls[t]
             distance, n_out = shape_distance(translated(shape, dt * np.asarray(velocity)), x)
-            support = cell_support(F, n_out, spacing, True)
-            gap[which] = distance + np.einsum("pi,pi->p", n_out, support)
+            gap[which] = edge_gap(distance, n_out, F, spacing, True)[0]
     return gap

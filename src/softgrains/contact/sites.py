@@ -198,7 +198,7 @@ def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: Contact
     wall_pairs = sorted({(int(a), int(b)) for a, b in zip(contacts.alpha[wall],
                                                           contacts.beta[wall], strict=True)})
     found = ([surface_contacts(pairs, steps, spacing, reach, round_bodies)] if pairs else []) \
-        + ([wall_contacts(wall_pairs, steps, shapes, spacing, reach, round_bodies)]
+        + ([wall_contacts(wall_pairs, steps, shapes, spacing, reach)]
            if wall_pairs else [])
     return subset(contacts, ~(grain | wall)), merge(found) if found else None
 

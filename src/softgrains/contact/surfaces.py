@@ -321,6 +321,14 @@ def cell_support(F: np.ndarray, n: np.ndarray, spacing: float, round_body: bool
     return -0.5 * spacing * np.einsum("pij,pj->pi", F, s)
 
 
+def edge_gap(distance: np.ndarray, n: np.ndarray, F: np.ndarray, spacing: float,
+             round_body: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The gap from a surface (``distance`` to it, outward normal n) to the edge of each
+    point's deformed cell, d − e with e = −n·r (r: :func:`cell_support`), and r."""
+    r = cell_support(F, n, spacing, round_body)
+    return distance + np.einsum("pi,pi->p", n, r), r
+
+
 def edge_stencil(step, points: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The velocity of the material at x_p + r_p as the point's cell carries it (x_p and F_p
     moving with the nodal velocities): v = Σ_I v_I [N_I(x_p) + ∇N_I(x_p)·r_p] (rows, weights).
@@ -354,8 +362,7 @@ def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float,
         n_out = -grad / length[:, None]
         # the distance to T's surface less the point's half cell, per unit of its rate
         # n·(v_O − v_T): g/λ
-        support = cell_support(O.step.pts.F[candidates], n_out, spacing, round_body)
-        gap = (distance + np.einsum("pi,pi->p", n_out, support)) / lam
+        gap = edge_gap(distance, n_out, O.step.pts.F[candidates], spacing, round_body)[0] / lam
     rows, weights = T.velocity_stencil(xc)
     reached = ((c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap) & (gap < reach)
                & (weights.sum(axis=1) > 0.5))
@@ -395,7 +402,7 @@ def shape_distance(shape, x: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None
 
 
 def wall_contacts(pairs: list[tuple[int, int]], steps: dict, shapes: dict, spacing: float,
-                  reach: float, round_bodies=frozenset()) -> SurfaceContacts:
+                  reach: float) -> SurfaceContacts:
     """Every (grain, wall) pair: the grain's points within reach against the kinematic
     wall's exact surface (gap d_wall(x_p) − e_p, normal the wall's outward normal, the
     wall's velocity prescribed). The grain is α, the wall β.
@@ -410,18 +417,17 @@ def wall_contacts(pairs: list[tuple[int, int]], steps: dict, shapes: dict, spaci
     real e grew (session 14, ``benchmarks/wall_gap_audit.py``)."""
     parts = []
     for grain, wall in pairs:
-        O = KernelSurface(steps[grain])
-        x = O.step.pts.x
+        step = steps[grain]
+        x = step.pts.x
         distance, n_out = shape_distance(shapes[wall], x)
         keep = np.flatnonzero(distance < reach + spacing)
-        support = cell_support(O.step.pts.F[keep], n_out[keep], spacing, True)
-        gap = distance[keep] + np.einsum("pi,pi->p", n_out[keep], support)
+        gap, support = edge_gap(distance[keep], n_out[keep], step.pts.F[keep], spacing, True)
         keep, gap, support = keep[gap < reach], gap[gap < reach], support[gap < reach]
         n, d = keep.size, x.shape[1]
-        width = O.step.N.shape[1]
+        width = step.N.shape[1]
         none = -np.ones((n, width), np.int64)
         parts.append((np.full(n, grain), np.full(n, wall), np.ones(n, bool), keep, x[keep],
-                      gap, n_out[keep], *edge_stencil(O.step, keep, support), none,
+                      gap, n_out[keep], *edge_stencil(step, keep, support), none,
                       np.zeros((n, width)),
                       -np.ones((n, 0), np.int64), np.zeros((n, 0, d)), n_out[keep]))
     return _concatenate(parts)
