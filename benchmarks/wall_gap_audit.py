@@ -17,7 +17,8 @@ k + 1 with step k:
 VARIANT (joined by "+"): "noedge" puts the force at the point instead of its cell edge;
 "square" takes the lattice square's corner as the cell support at walls (session 14's);
 "nodalwalls" keeps the case's wall sites (the default: nodes) and audits only the grain
-pairs' point contacts: per step, how many deepened (same rule) and the worst three.
+pairs' point contacts: per step, how many deepened (same rule) and the worst three;
+"check" turns ``contact.end_gap_check`` on.
 
 Session 14 (2026-12-03) found with it the two ways points got 0.5 h into the walls of the
 README main job (the square support's kink, and corner points beyond the outer-point
@@ -143,8 +144,10 @@ def main() -> None:
     n_steps = int(sys.argv[4]) if len(sys.argv) > 4 else 10
     shutil.rmtree(out, ignore_errors=True)
     shutil.copytree(src, out)
-    walls = [] if "nodalwalls" in VARIANT else ["contact.wall_sites=points"]
-    sim = Simulation(load_case(out / "case.toml", walls), out=out)
+    overrides = [] if "nodalwalls" in VARIANT else ["contact.wall_sites=points"]
+    if "check" in VARIANT:
+        overrides.append("contact.end_gap_check=true")
+    sim = Simulation(load_case(out / "case.toml", overrides), out=out)
     sim.resume(out / "checkpoint.h5")
     h = sim.case.grid.cell_size
     spacing = h / sim.model.points_per_cell

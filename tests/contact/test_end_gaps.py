@@ -6,6 +6,7 @@ import pytest
 
 from softgrains import Simulation, load_case
 from softgrains.contact import end_gaps, surfaces
+from softgrains.contact.sites import point_blocks
 from softgrains.geometry import Rectangle
 from softgrains.integrator.implicit import BodyStep
 
@@ -89,3 +90,59 @@ def test_end_gaps_against_a_moving_wall_and_a_translated_grain():
     # the calibrated distance of a lattice body's kernel surface is exact to ~1e-3 h here
     # (surfaces.calibrated_distance; measured 1.3e-3 h)
     assert np.allclose(after[disk_on_top], found.gap[disk_on_top] - sink, atol=5e-3 * H)
+
+
+def _linear_change(sc, steps: dict) -> np.ndarray:
+    """Each contact's gap change predicted through its rows (sites.py's point blocks),
+    n·(v_α − v_β) with the displacements u the steps carry in place of the velocities."""
+    out = np.zeros(len(sc))
+    for sign, rows, weights, body, surface_side in (
+            (1.0, sc.rows_alpha, sc.weights_alpha, sc.alpha, ~sc.owner_is_alpha),
+            (-1.0, sc.rows_beta, sc.weights_beta, sc.beta, sc.owner_is_alpha)):
+        rate_rows = np.where(surface_side[:, None], sc.rate_rows, -1)
+        r, B = point_blocks(rows, weights, rate_rows, sc.rate_vec, sc.rate_normal)
+        for c in range(len(sc)):
+            u = steps[int(body[c])].u
+            v = sum(B[c, k] @ u[r[c, k]] for k in range(r.shape[1]) if r[c, k] >= 0)
+            out[c] += sign * sc.normal[c] @ v
+    return out
+
+
+@pytest.mark.parametrize("shape_function", ["linear", "bspline2"])
+@pytest.mark.parametrize("deformation", ["stretch", "shear"])
+def test_grain_contact_rows_see_their_cell_edge_move(shape_function, deformation):
+    """The block under the disk deformed by 10%, its top row of points under the disk's
+    lowest point staying:
+
+    - stretched vertically, the top cells grow by ½δ·0.1 = 0.025 h towards the disk; the
+      true end gap of the block's points against the disk falls by that much, and the
+      contact's rows predict it (the own side moves with its cell edge,
+      Σ_I u_I [N_I + ∇N_I·r_p]; session 16) within 0.003 h (measured 0.0015 h). At the
+      point's own velocity (sessions 11–15) the rows predicted no change, 0.024 h off: a
+      first-order error, which a loaded point sliding on a soft block met at every step
+      (0.014 h a step) and which the end-gap check could only correct by doing work;
+    - sheared (u_y = γ x, F_yx = γ), the round cell's extent ½δ‖Fᵀn‖ changes at second
+      order (¼δγ² = 0.0006 h under the disk's lowest point), as the rows predict; the
+      lattice square's ½δ Σ_j |(Fᵀn)_j| has its kink at this vertical normal and grows by
+      ½δ|γ| = 0.025 h where the edge's linear rate says 0: why the cells are round
+      between grains too."""
+    steps = _steps(shape_function, [DISK, BLOCK])
+    spacing, reach, dt, strain = H / 2, H, 1e-3, 0.1
+    found = surfaces.surface_contacts([(0, 1)], steps, spacing, reach)
+    top = steps[1].pts.x[:, 1].max()
+    _set_displacement(steps[0], lambda X: np.zeros_like(X))
+    if deformation == "stretch":
+        _set_displacement(steps[1], lambda X: np.stack([0.0 * X[:, 0],
+                                                        strain * (X[:, 1] - top)], axis=1))
+    else:
+        _set_displacement(steps[1], lambda X: np.stack([0.0 * X[:, 0],
+                                                        strain * (X[:, 0] - 1.013)], axis=1))
+    true = end_gaps.end_gaps(found, steps, {}, spacing, dt)
+    under = ((~found.owner_is_alpha) & (np.abs(found.gap) < 0.1 * H)
+             & (np.abs(found.position[:, 0] - 1.013) < 1.5 * H)
+             & np.all(steps[1].active_row[steps[1].nodes[found.point]] >= 0, axis=1))
+    assert under.sum() >= 3
+    if deformation == "stretch":  # the cells grew towards the disk
+        assert np.all((true - found.gap)[under] < -0.8 * strain * spacing / 2)
+    error = np.abs(true - found.gap - _linear_change(found, steps))[under]
+    assert error.max() < 0.003 * H

@@ -302,8 +302,8 @@ class ContactSettings(_Section):
         "at the end of the step (points and surfaces moved): where the linearised gap "
         "missed an overlap below min(start gap, -0.025 h), the constraint is corrected and "
         "the step solved again (at most 3 times). Holds the linearisation's errors from "
-        "adding up; each correction does work in the energy bookkeeping (opt-in while it "
-        "is measured: docs/dev-notes.md, session 15)")
+        "adding up; a correction does work in the energy bookkeeping (opt-in while its "
+        "cost is measured: docs/dev-notes.md, sessions 15-16)")
     overlap_removal: float = Field(
         0.0, ge=0.0, le=1.0, description="fraction of an estimated overlap between two "
         "bodies removed per step (0: overlaps are only kept from growing)")

@@ -22,8 +22,7 @@ step of the bodies with a complete solve of the contact problem.
     step's u): where g⁺ is an overlap below its floor (its start gap, and at least
     −GAP_OVERLAP h), the constraint is moved by the error e = g⁺ − g_lin, re-evaluated
     after each solve (a fixed point on the nonlinear gap), and the loop goes on (at most
-    GAP_UPDATES times a step). Without it the linearisation's second-order errors
-    (0.02–0.1 h at a contact, a few a step in the dense compaction) stay as overlaps and
+    GAP_UPDATES times a step). Without it the linearisation's errors stay as overlaps and
     add up (session 15)
 
 Kinematic bodies take no impulse response (W = 0): their nodal velocity is their prescribed
@@ -173,7 +172,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # the pairs taken at points leave the nodal set before its gaps are estimated
         contacts, points = point_contacts(
             lattice, steps, walls if walls_at_points else {}, contacts,
-            spacing, reach, round_bodies, settings.grain_sites == "surface")
+            spacing, reach, settings.grain_sites == "surface")
         gaps = np.zeros(len(contacts))
     if gap_points is not None and len(contacts):
         X = node_position(lattice, contacts.node)
@@ -230,8 +229,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     corrected = np.zeros(n, bool)  # the contacts whose constraint carries that error
     # the linear constraint holds g_lin ≥ predicted − held; the true end gap's floor is
     # min(predicted, −GAP_OVERLAP h): an overlap may not deepen, nor pass GAP_OVERLAP h
-    slack = np.maximum(predicted - held - np.minimum(predicted, -GAP_OVERLAP * lattice.h),
-                       0.0)
+    floor_gap = np.minimum(predicted, -GAP_OVERLAP * lattice.h)
+    slack = np.maximum(predicted - held - floor_gap, 0.0)
 
     scale = 0.0
     for slot, body in enumerate(slots.bodies):
@@ -309,18 +308,20 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                     or diag.gap_updates >= GAP_UPDATES):
                 break
             # the constraint is on the true end-of-step gap: where the linearised one
-            # missed an overlap, correct the constraint by the error and solve again
-            linear = predicted + theta * dt * np.einsum(
-                "ci,ci->c", actual, contacts.normal)
+            # missed an overlap (a true end gap below its floor: not wherever the error
+            # is negative, an open contact's too, which re-solved nearly every step),
+            # correct the constraint by the error and solve again
             lone = point_contact >= 0
-            true = end_gaps(select(points, lone), steps, walls, spacing, dt, round_bodies)
-            new, offset = _end_gap_offsets(true, point_contact[lone], linear, slack,
-                                           corrected, lattice.h)
-            if not new.any() and np.abs(offset - end_gap_offset).max(
+            at = point_contact[lone]
+            true = end_gaps(select(points, lone), steps, walls, spacing, dt)
+            below = ~corrected[at] & (true < floor_gap[at] - GAP_ERROR * lattice.h)
+            linear = predicted + theta * dt * np.einsum("ci,ci->c", actual, contacts.normal)
+            offset = _end_gap_offsets(true, at, linear, slack, corrected)
+            if not below.any() and np.abs(offset - end_gap_offset).max(
                     initial=0.0) < GAP_ERROR * lattice.h:
                 break
-            corrected |= new
-            end_gap_offset = offset
+            corrected[at] |= below
+            end_gap_offset = _end_gap_offsets(true, at, linear, slack, corrected)
             bias = (held + end_gap_offset) / (theta * dt)
             diag.gap_updates += 1
     else:
@@ -355,20 +356,16 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     return ContactState(contacts, P, status, estimated), diag
 
 
-def _end_gap_offsets(true: np.ndarray, lone: np.ndarray, linear: np.ndarray,
-                     slack: np.ndarray, corrected: np.ndarray, h: float
-                     ) -> tuple[np.ndarray, np.ndarray]:
-    """The offsets o = min(e + s, 0) of the constraints from the error e = g⁺ − g_lin of
-    the linearised end-of-step gap g_lin (``linear``) against the true one g⁺ (``true``,
-    end_gaps.py, of the contacts ``lone``) and the ``slack`` s between what
-    the linear constraint holds and the true gap's floor; at the contacts already
-    ``corrected`` in this step and at those where o < −GAP_ERROR h (``new``), 0 elsewhere.
-    Returns (new, o)."""
+def _end_gap_offsets(true: np.ndarray, at: np.ndarray, linear: np.ndarray,
+                     slack: np.ndarray, corrected: np.ndarray) -> np.ndarray:
+    """The offsets o = min(e + s, 0) of the ``corrected`` contacts' constraints (0
+    elsewhere), from the error e = g⁺ − g_lin of the linearised end-of-step gap g_lin
+    (``linear``) against the true one g⁺ (``true``, end_gaps.py, of the contacts ``at``)
+    and the ``slack`` s between what the linear constraint holds and the true gap's floor:
+    the constraint g_lin ≥ … − o then holds g⁺ ≥ its floor while e stays."""
     error = np.zeros(linear.size)
-    error[lone] = np.nan_to_num(true - linear[lone])
-    offset = np.minimum(error + slack, 0.0)
-    new = ~corrected & (offset < -GAP_ERROR * h)
-    return new, np.where(corrected | new, offset, 0.0)
+    error[at] = np.nan_to_num(true - linear[at])
+    return np.where(corrected, np.minimum(error + slack, 0.0), 0.0)
 
 
 def _predicted_velocity(step, rows: np.ndarray, du: np.ndarray | None) -> np.ndarray:

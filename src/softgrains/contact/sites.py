@@ -181,8 +181,8 @@ def point_blocks(rows: np.ndarray, weights: np.ndarray, rate_rows: np.ndarray,
 
 
 def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: ContactNodes,
-                   spacing: float, reach: float, round_bodies=frozenset(),
-                   grains: bool = True) -> tuple[ContactNodes, SurfaceContacts | None]:
+                   spacing: float, reach: float, grains: bool = True
+                   ) -> tuple[ContactNodes, SurfaceContacts | None]:
     """Split the nodal contacts: those of every pair of deformable grains (``grains``) and of
     every grain and rectangular or round wall in ``walls`` are replaced by point-to-surface
     contacts at the grains' outer points (surfaces.py). Returns the nodal contacts left (the
@@ -197,7 +197,7 @@ def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: Contact
                                                      contacts.beta[grain], strict=True)})
     wall_pairs = sorted({(int(a), int(b)) for a, b in zip(contacts.alpha[wall],
                                                           contacts.beta[wall], strict=True)})
-    found = ([surface_contacts(pairs, steps, spacing, reach, round_bodies)] if pairs else []) \
+    found = ([surface_contacts(pairs, steps, spacing, reach)] if pairs else []) \
         + ([wall_contacts(wall_pairs, steps, shapes, spacing, reach)]
            if wall_pairs else [])
     return subset(contacts, ~(grain | wall)), merge(found) if found else None

@@ -13,25 +13,26 @@ distance to it (> 0 outside) is read through the profile of a flat boundary, c =
 A contact is taken at every point p of the outer layer of a grain O (d_O(x_p) > −δ, δ the
 point spacing) that lies within T's kernel reach, for both orders of a pair (two passes);
 against a kinematic wall at every point within reach (``wall_contacts``).
-Its gap is the distance from T's surface to the edge of p's deformed cell, per unit of its
-rate,
-    g_p = (d_T(x_p) − e_p)/λ,   e_p = −n_T·r_p,   r_p = −½δ F_p sign(F_pᵀ n_T)
-    (ring cells: r_p = −½δ F_p F_pᵀn_T/‖F_pᵀn_T‖),  λ = ‖∇d_T‖ = R ‖∇c‖/F'(F⁻¹(c))
-    (1 across a flat boundary),
+Its gap is the distance from T's surface to the edge of p's deformed round cell, per unit
+of its rate,
+    g_p = (d_T(x_p) − e_p)/λ,   e_p = −n_T·r_p = ½δ‖F_pᵀn_T‖,   r_p = −½δ F_p F_pᵀn_T/‖F_pᵀn_T‖,
+    λ = ‖∇d_T‖ = R ‖∇c‖/F'(F⁻¹(c))   (1 across a flat boundary),
 and its normal rate is taken from both bodies' nodal velocities:
     ġ_p λ⁻¹ ≈ n_T·v_O(x_p + r_p) − (1/‖∇c‖) ∂c/∂t(x_p),     ∂c/∂t(x) = Σ_J a_J·v_J,
     v_O(x_p + r_p) = Σ_I v_I [N_I(x_p) + ∇N_I(x_p)·r_p],
     a_J = Σ_q V_q [−∇W(x − x_q) N_J(x_q) + W(x − x_q) ∇N_J(x_q)]
 (p moving with Σ_I N_I v_I and its cell with Ḟ = ∇v F; T's points moving with ẋ_q =
 Σ_J N_J(x_q) v_J, their volumes with V̇_q = V_q ∇·v; Σ_J a_J = −∇c, so momentum is
-exchanged exactly). Against a wall the cell is the round one for every grain, and the own
-side's velocity is that of p's cell edge,
-v_O(x_p + r_p) (session 13: with p's own velocity the edge's motion was left out of the
-rate and the force acted h/4 inside the grain, so the wall's force had the wrong lever arm:
-the small compaction's volume-averaged stress came out 7.9% below the wall's, 2.8% with
-the edge). Between grains it is still p's own velocity v_O(x_p), which the first line
-approximates to O(δ‖∇v‖): with the edge there the sliding disk of the tests sank 0.063 h
-into its block (0.05 h bar; measured with undeformed half cells), not yet understood.
+exchanged exactly). The own side's velocity is that of p's cell edge, v_O(x_p + r_p), so
+the cell's stretching and shearing are in the rate (session 16: at p's own velocity they
+were not, and a point carrying a disk's weight on a soft block saw its edge move 0.014 h
+a step beyond the linearised gap; session 13: at walls the force then acted h/4 inside the
+grain, and the small compaction's volume-averaged stress came out 7.9% below the wall's,
+2.8% with the edge). The cell is the round one for every grain, lattice squares included:
+the square's extent ½δ Σ_j |(Fᵀn)_j| has a kink where a cell edge is parallel to the
+surface (an axis-aligned wall, the bottom of a disk), across which the edge's linear rate
+points the wrong way (session 14); with the round cell the edge stencil between grains
+holds the sliding disk of the tests within 0.03 h (with the square one it sank 0.063 h).
 The surface side's velocity, along n_T, is the motion of T's smoothed surface above and,
 across n_T (friction), T's velocity field at x_p. Taking the surface's normal velocity from
 where T's points are — not T's velocity field at x_p, a point outside T — is what keeps the
@@ -339,13 +340,13 @@ def edge_stencil(step, points: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, n
     return step.active_row[step.nodes[points]], weights
 
 
-def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float,
-          round_body: bool):
+def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float):
     """Body ``own``'s outer points against ``other``'s surface T: their indices, gaps,
-    T's outward normals, the own stencils (what moves each point), T's sampled stencils and
-    T's exact normal velocity (rows, vectors, normal). A point is seen only within T's
-    kernel reach (c > 0: about 1.25 h outside T's surface) and where T has an active node
-    in its stencil: two grains closing faster than ~1 h a step meet one step late."""
+    T's outward normals, the own stencils (the velocity of each point's cell edge), T's
+    sampled stencils and T's exact normal velocity (rows, vectors, normal). A point is seen
+    only within T's kernel reach (c > 0: about 1.25 h outside T's surface) and where T has
+    an active node in its stencil: two grains closing faster than ~1 h a step meet one
+    step late."""
     O, T = surfaces[own], surfaces[other]
     x = O.step.pts.x
     lo, hi = T.step.pts.x.min(axis=0), T.step.pts.x.max(axis=0)
@@ -362,7 +363,8 @@ def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float,
         n_out = -grad / length[:, None]
         # the distance to T's surface less the point's half cell, per unit of its rate
         # n·(v_O − v_T): g/λ
-        gap = edge_gap(distance, n_out, O.step.pts.F[candidates], spacing, round_body)[0] / lam
+        gap, support = edge_gap(distance, n_out, O.step.pts.F[candidates], spacing, True)
+        gap /= lam
     rows, weights = T.velocity_stencil(xc)
     reached = ((c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap) & (gap < reach)
                & (weights.sum(axis=1) > 0.5))
@@ -373,8 +375,7 @@ def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float,
     sub_nb = near[1][np.repeat(reached, counts)]  # the neighbour lists of the kept points
     rate_rows, rate_vec = T.rate(xc[reached], (sub_ptr, sub_nb))
     rate_vec /= length[reached][:, None, None]
-    own_rows = O.step.active_row[O.step.nodes[keep]]
-    return (keep, gap[reached], n_out, (own_rows, O.step.N[keep]),
+    return (keep, gap[reached], n_out, edge_stencil(O.step, keep, support[reached]),
             (rows[reached], weights[reached]), (rate_rows, rate_vec, n_out))
 
 
@@ -457,14 +458,14 @@ def _concatenate(parts: list[tuple]) -> SurfaceContacts:
 
 
 def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,
-                     reach: float, round_bodies=frozenset()) -> SurfaceContacts:
+                     reach: float) -> SurfaceContacts:
     """Both passes for every pair (α, β) of deformable bodies, α < β."""
     surfaces = {b: KernelSurface(steps[b]) for pair in pairs for b in pair}
     parts = []
     for a, b in pairs:
         for own, other in ((a, b), (b, a)):
             idx, gap, n_out, own_st, other_st, rate = _pass(own, other, surfaces, spacing,
-                                                            reach, own in round_bodies)
+                                                            reach)
             own_alpha = own == a
             # normal from β into α: out of β's surface in the first pass, into α's in the
             # second
