@@ -315,13 +315,13 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             at = point_contact[lone]
             true = end_gaps(select(points, lone), steps, walls, spacing, dt)
             below = ~corrected[at] & (true < floor_gap[at] - GAP_ERROR * lattice.h)
+            corrected[at] |= below
             linear = predicted + theta * dt * np.einsum("ci,ci->c", actual, contacts.normal)
             offset = _end_gap_offsets(true, at, linear, slack, corrected)
             if not below.any() and np.abs(offset - end_gap_offset).max(
                     initial=0.0) < GAP_ERROR * lattice.h:
                 break
-            corrected[at] |= below
-            end_gap_offset = _end_gap_offsets(true, at, linear, slack, corrected)
+            end_gap_offset = offset
             bias = (held + end_gap_offset) / (theta * dt)
             diag.gap_updates += 1
     else:
