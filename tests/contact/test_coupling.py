@@ -141,3 +141,62 @@ def test_resting_block_boundary_gap(gap, wall_sites):
         assert abs(residual) < 0.05
     else:
         assert residual > 0.3
+
+
+class _Body:
+    """A body step stand-in whose compliance at its contact rows is ``exact`` with the
+    exact tangent and the identity with the projected one."""
+
+    def __init__(self, exact):
+        self.exact, self.projected, self.directions = np.asarray(exact, float), False, 0
+
+    def contact_response(self, rows, delassus):
+        return None, np.eye(2) if self.projected else self.exact
+
+    def newton_direction(self, direct=False):
+        self.directions += 1
+        return np.zeros(1)
+
+    def use_projected_tangent(self):
+        switched, self.projected = not self.projected, True
+        return switched
+
+
+def test_a_body_with_an_indefinite_compliance_switches_to_the_projected_tangent():
+    """tangent = "auto": a body whose W at its contact rows has a negative eigenvalue (an
+    exact tangent under compression; the contact problem is not monotone there and its
+    solves stalled at 450-690 iterations in a dense compaction) is flagged, and when the
+    solve stalls it takes the projected tangent (its W redone); a semidefinite W, singular
+    ones included (redundant sites), keeps the exact tangent. With tangent = "exact" the
+    indefinite W stays."""
+    from types import SimpleNamespace
+
+    from softgrains.contact.coupling import (
+        _semidefinite,
+        _switch_indefinite,
+        _update_compliances,
+    )
+
+    indefinite, singular = _Body([[1.0, 2.0], [2.0, 1.0]]), _Body([[1.0, 1.0], [1.0, 1.0]])
+    steps = {3: indefinite, 5: singular}
+    slots = SimpleNamespace(bodies=[3, 5], W=[None, None], response=[None, None],
+                            rows=[None, None], semidefinite=[False, False],
+                            compliance=lambda slot, W: W)
+    du = {3: np.ones(1), 5: np.ones(1)}
+    assert not _update_compliances(steps, slots, du, delassus=True)
+    assert slots.semidefinite == [False, True]
+    assert _switch_indefinite(steps, slots) == [3]
+    assert indefinite.projected and not singular.projected and slots.W[0] is None
+    assert _update_compliances(steps, slots, du, delassus=True)  # every W_s now PSD
+    np.testing.assert_array_equal(slots.W[0], np.eye(2))
+    np.testing.assert_array_equal(slots.W[1], singular.exact)
+    stuck = _Body([[1.0, 2.0], [2.0, 1.0]])
+    stuck.use_projected_tangent = lambda: False  # tangent = "exact"
+    slots.W, slots.semidefinite = [None, None], [False, False]
+    assert not _update_compliances({3: stuck, 5: singular}, slots, du, delassus=True)
+    assert _switch_indefinite({3: stuck, 5: singular}, slots) == []
+    assert not stuck.projected
+    # round-off below a PSD matrix's zero eigenvalue is not indefiniteness
+    rotation = np.array([[0.6, 0.8], [-0.8, 0.6]])
+    assert _semidefinite(rotation @ np.diag([1.0, -1e-13]) @ rotation.T)
+    assert not _semidefinite(rotation @ np.diag([1.0, -1e-6]) @ rotation.T)

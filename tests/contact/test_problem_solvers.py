@@ -263,3 +263,40 @@ def test_per_point_wall_sites_with_a_nearly_singular_W_are_solved(tresca, monkey
     if not tresca:  # what the fallback is for: without it the solve stops short
         monkeypatch.setattr(solvers, "PROXIMAL_ITERATIONS", 0)
         assert not solve(problem, None, options).converged
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_assembled_delassus_is_the_map_from_impulses_to_velocities(d):
+    """W (delassus.py, in global axes and in the contact frames) against its definition,
+    the columns w(e_j) − w(0) of the problem's own velocity map: three bodies, two contacts
+    between the same two bodies (their coupling summed over both), one body touched from
+    both sides, one contact against a wall."""
+    rng = np.random.default_rng(4)
+    #            α slot, col   β slot, col
+    touches = [((0, 0), (1, 0)), ((0, 1), (1, 1)), ((2, 0), (1, 2)), ((2, 1), (-1, 0))]
+    n = len(touches)
+    k = np.array([2, 3, 2], np.int64)
+    blocks = [(lambda a: a @ a.T)(rng.normal(size=(ki * d, ki * d))) for ki in k]
+    normal = rng.normal(size=(n, d))
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    problem = ContactProblem(
+        normal=normal, bias=np.zeros(n), mu=np.zeros(n),
+        a_slot=np.array([a[0] for a, _ in touches], np.int64),
+        a_col=np.array([a[1] for a, _ in touches], np.int64),
+        b_slot=np.array([b[0] for _, b in touches], np.int64),
+        b_col=np.array([b[1] for _, b in touches], np.int64),
+        wall_va=np.zeros((n, d)), wall_vb=rng.normal(size=(n, d)),
+        k_off=np.r_[0, np.cumsum(k)[:-1]].astype(np.int64), k_size=k,
+        w_off=np.r_[0, np.cumsum([b.size for b in blocks])[:-1]].astype(np.int64),
+        W=np.concatenate([b.ravel() for b in blocks]), V_free=rng.normal(size=(k.sum(), d)))
+    base = problem.velocities(np.zeros((n, d))).ravel()
+    expected = np.column_stack([problem.velocities(np.eye(n * d)[j].reshape(n, d)).ravel()
+                                - base for j in range(n * d)])
+    np.testing.assert_allclose(problem.delassus().toarray(), expected, atol=1e-12 * abs(
+        expected).max())
+    R = problem.frames()
+    T = np.zeros((n * d, n * d))
+    for c in range(n):
+        T[c * d:(c + 1) * d, c * d:(c + 1) * d] = R[c]
+    np.testing.assert_allclose(problem.delassus(R).toarray(), T @ expected @ T.T,
+                               atol=1e-12 * abs(expected).max())

@@ -93,7 +93,8 @@ class SimulationSettings(_Section):
         "auto", description="Newton matrix: exact (quadratic convergence), per-point "
         "tangents made positive semi-definite (robust under compression, linear "
         "convergence), or auto: exact, switching to projected within a step whose "
-        "iterations fail to converge")
+        "iterations fail to converge, and for a body whose compliance at its contacts "
+        "is indefinite once a contact solve stalls")
 
     @property
     def n_steps(self) -> int:

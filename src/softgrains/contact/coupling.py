@@ -1,5 +1,5 @@
 """Contact and bulk together: the coupled loop of ALGORITHM.md §6, each iteration a Newton
-step of the bodies with a complete solve of the contact problem.
+step of the bodies with a solve of the contact problem.
 
     set up every deformable body's step; find the contact nodes, normals and gaps (between
         two grains, by default, point-to-surface contacts instead, grouped in patches
@@ -14,7 +14,8 @@ step of the bodies with a complete solve of the contact problem.
         each body in contact: its compliance W at its contact sites (H W Hᵀ)
             Delassus: κ w [A⁻¹]_cc from that factorization;  lumped: diag(1/m)
         the contact problem (problem.py) on the rows' velocities predicted at u + du,
-            solved completely (solvers.py: semismooth Newton by default)
+            solved (solvers.py: semismooth Newton by default) to max(0.1 tol, FORCING ×
+            its residual at the start): loose while the bodies are far from converged
         each body: the combined step du + X ΔQ = −A⁻¹ R(u; P_new) through the line search
     until the contacts' complementarity (natural-map) residual ≤ tol and every body's
     residual ≤ tol × the largest impulse; then (``end_gap_check``, opt-in) the point
@@ -26,8 +27,9 @@ step of the bodies with a complete solve of the contact problem.
     add up (session 15)
 
 Kinematic bodies take no impulse response (W = 0): their nodal velocity is their prescribed
-velocity. With ``tangent = "auto"`` the bodies switch to the projected tangent within a
-step whose contact solves keep failing (an indefinite W) or that needs many iterations.
+velocity. With ``tangent = "auto"`` a body whose compliance W_s is indefinite takes the
+projected tangent when a contact solve stalls on it, and all bodies switch to it within a
+step whose contact solves keep failing or that needs many iterations.
 """
 
 from __future__ import annotations
@@ -67,7 +69,12 @@ from softgrains.grid.lattice import Lattice
 IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
 AUTO_TANGENT_ITERATIONS = 10  # tangent = "auto": projected after this many iterations
 AUTO_TANGENT_FAILED_SOLVES = 2  # ... or after this many unconverged contact solves
+INDEFINITE = 1e-9  # a body's W with an eigenvalue below −this × its largest diagonal entry
 SOLVE_TOLERANCE_FRACTION = 0.1  # each contact solve to this fraction of the loop's tolerance
+# a solve on an indefinite W that a tangent switch can mend: Newton only, this many
+# iterations (those that converged in a dense compaction took 9-11)
+INDEFINITE_NEWTON_ITERATIONS = 20
+FORCING = 0.01  # ... or to this fraction of its residual at the start, if that is larger
 # the end-of-step gap check (end_gaps.py): a point contact whose true end gap would pass
 # below its floor, min(its start gap, −GAP_OVERLAP h), by GAP_ERROR h or more has its
 # constraint corrected by the difference and the step solved again (a fixed point on the
@@ -255,19 +262,31 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # the Newton direction of every body not converged, with the current impulses
         du = {i: b.newton_direction(direct=delassus and i in in_contact)
               for i, b in steps.items() if not done[i]}
-        for slot, body in enumerate(slots.bodies):
-            if slots.W[slot] is None or (delassus and body in du):
-                slots.response[slot], W_rows = steps[body].contact_response(
-                    slots.rows[slot], delassus)
-                slots.W[slot] = slots.compliance(slot, W_rows)
+        psd = _update_compliances(steps, slots, du, delassus)
         # the contact rows' velocities at the end of that Newton step (linear prediction)
         V = slots.stack(lambda body, rows, du=du: _predicted_velocity(steps[body], rows,
                                                                       du.get(body)))
         problem = _problem(slots, contacts, wall_va, wall_vb, bias, mu, V, P)
-        # the Tresca fallback needs a PSD W: every body in contact on a projected tangent
-        psd = not delassus or all(steps[b].projected for b in slots.bodies)
-        result = solve(problem, P, replace(options, tresca=psd))
-        failed_solves += result.residual > settings.tolerance
+        # an inexact solve while the start is far off (a forcing term, as in inexact Newton
+        # methods): the bodies' next iterate changes the problem anyway. The fallbacks
+        # after a stalled Newton presume a monotone problem (W PSD; Tresca too)
+        tolerance = max(options.tolerance, FORCING * residual_norm(problem, P, floor=floor))
+        switchable = not psd and any(
+            not ok and steps[b].settings.tangent == "auto" and not steps[b].projected
+            for b, ok in zip(slots.bodies, slots.semidefinite, strict=True))
+        result = solve(problem, P, replace(
+            options, tresca=psd, tolerance=tolerance, fallbacks=not switchable,
+            max_iterations=(min(options.max_iterations, INDEFINITE_NEWTON_ITERATIONS)
+                            if switchable else options.max_iterations)))
+        failed = result.residual > max(settings.tolerance, tolerance)
+        failed_solves += failed
+        if failed and switchable:
+            # a stalled solve on an indefinite W (seen at 450-690 iterations a solve in a
+            # dense compaction, with the fallbacks): those bodies take the projected
+            # tangent and the iteration is redone
+            for i in _switch_indefinite(steps, slots):
+                done[i] = False
+            continue
         if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k == AUTO_TANGENT_ITERATIONS:
             # tangent = "auto": an exact tangent can make W indefinite under compression
             # (the contact problem then has no unique solution) or converge slowly: the
@@ -354,6 +373,43 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))
     return ContactState(contacts, P, status, estimated), diag
+
+
+def _update_compliances(steps: dict, slots: Slots, du: dict, delassus: bool) -> bool:
+    """Each body's compliance W_s at its contact rows where it is not known yet or its
+    Newton matrix changed (a new direction du); whether every W_s is positive semidefinite
+    (a projected tangent's is: A is SPD; an exact one's is checked)."""
+    for slot, body in enumerate(slots.bodies):
+        if not (slots.W[slot] is None or (delassus and body in du)):
+            continue
+        slots.response[slot], W_rows = steps[body].contact_response(slots.rows[slot], delassus)
+        slots.W[slot] = slots.compliance(slot, W_rows)
+        slots.semidefinite[slot] = (not delassus or steps[body].projected
+                                    or _semidefinite(slots.W[slot]))
+    return all(slots.semidefinite)
+
+
+def _switch_indefinite(steps: dict, slots: Slots) -> list[int]:
+    """``tangent = "auto"``: the bodies whose W_s is indefinite (an exact tangent under
+    compression) take the projected tangent; their W_s is dropped. Returns them."""
+    switched = [body for slot, body in enumerate(slots.bodies)
+                if not slots.semidefinite[slot] and steps[body].use_projected_tangent()]
+    for slot, body in enumerate(slots.bodies):
+        if body in switched:
+            slots.W[slot] = None
+    return switched
+
+
+def _semidefinite(W: np.ndarray) -> bool:
+    """Whether the symmetric part of W has no eigenvalue below −INDEFINITE × max diag."""
+    scale = float(np.abs(np.diagonal(W)).max(initial=0.0))
+    if scale == 0.0:
+        return True
+    try:
+        np.linalg.cholesky(0.5 * (W + W.T) + INDEFINITE * scale * np.eye(W.shape[0]))
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 def _end_gap_offsets(true: np.ndarray, at: np.ndarray, linear: np.ndarray,

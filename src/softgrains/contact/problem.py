@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from softgrains.contact.delassus import assemble
+
 FORMAT_VERSION = 1
 VELOCITY_RESOLUTION = 1e-10  # relative: velocity differences below it are round-off
 
@@ -121,30 +123,17 @@ class ContactProblem:
         order = np.argsort(slot, kind="stable")
         return contact[order], slot[order], col[order], sign[order]
 
-    def delassus(self) -> sp.csr_matrix:
-        """W (n d × n d, (contact, component) order, global axes): w = q + W P.
+    def delassus(self, frames: np.ndarray | None = None) -> sp.csr_matrix:
+        """W (n d × n d, (contact, component) order): w = q + W P, in global axes or, with
+        ``frames`` (n, d, d), in those contact frames (delassus.py).
 
         W_cc' = Σ_s σ_c σ_c' W_s[col_c, col_c'] over the bodies s that both contacts touch
         (σ = +1 on the α side, −1 on the β side).
         """
-        d, n = self.dim, self.n_contacts
+        if frames is None:
+            frames = np.broadcast_to(np.eye(self.dim), (self.n_contacts, self.dim, self.dim))
         contact, slot, col, sign = self.touches()
-        if contact.size == 0:
-            return sp.csr_matrix((n * d, n * d))
-        # all pairs (i, j) of touches of the same body
-        start = np.searchsorted(slot, slot, side="left")
-        count = np.searchsorted(slot, slot, side="right") - start
-        i = np.repeat(np.arange(contact.size), count)
-        j = start[i] + np.arange(i.size) - np.repeat(np.cumsum(count) - count, count)
-        kd = self.k_size[slot[i]] * d
-        p, q = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
-        flat = (self.w_off[slot[i]][:, None, None]
-                + (col[i][:, None, None] * d + p) * kd[:, None, None]
-                + col[j][:, None, None] * d + q)
-        vals = self.W[flat] * (sign[i] * sign[j])[:, None, None]
-        rows = contact[i][:, None, None] * d + p + 0 * q
-        cols = contact[j][:, None, None] * d + q + 0 * p
-        return sp.csr_matrix((vals.ravel(), (rows.ravel(), cols.ravel())), shape=(n * d, n * d))
+        return assemble(contact, slot, col, sign, self.W, self.w_off, self.k_size, frames)
 
     def diagonal_blocks(self) -> np.ndarray:
         """W_cc (n, d, d): each contact's own compliance, Σ of its bodies' diagonal blocks."""

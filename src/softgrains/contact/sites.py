@@ -89,6 +89,7 @@ class Slots:
         self.k_off = np.r_[0, np.cumsum(self.k_size)][:-1].astype(np.int64)
         self.response: list[np.ndarray | None] = [None] * len(body_ids)
         self.W: list[np.ndarray | None] = [None] * len(body_ids)
+        self.semidefinite = [False] * len(body_ids)  # W known to be PSD (coupling.py)
 
     def sites(self, slot: int) -> int:
         H = self.H[slot]

@@ -67,13 +67,16 @@ class ContactSolverOptions:
     ``max_iterations``: Newton iterations or Gauss–Seidel sweeps; ``floor``: an impulse
     below which the relative residual is measured against the floor instead; ``tresca``:
     whether a stalled Newton may end with the Tresca fixed point (its Tresca problems are
-    monotone only for a symmetric PSD W: not with an exact tangent under compression)."""
+    monotone only for a symmetric PSD W: not with an exact tangent under compression);
+    ``fallbacks``: whether a stalled Newton goes on with them at all (the caller can
+    instead change an indefinite W)."""
 
     method: str = "newton"
     tolerance: float = 1e-6
     max_iterations: int = 50
     floor: float = 0.0
     tresca: bool = True  # the Tresca fixed point as the last fallback (needs W symmetric PSD)
+    fallbacks: bool = True  # after a stalled Newton (they presume a monotone problem)
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -101,7 +104,7 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     if options.method == "nsgs":
         return _nsgs(problem, P, options)
     result = _newton(problem, P, options)
-    if result.converged:
+    if result.converged or not options.fallbacks:
         return result
     # the Alart–Curnier Newton has no global convergence with Coulomb friction (seen
     # stalling at 3e-2 on a frictional compaction step whose problem Gauss–Seidel solves in
@@ -257,10 +260,9 @@ class _LocalOperator:
 def _local_operator(problem: ContactProblem) -> _LocalOperator:
     def compute():
         frames = problem.frames()
-        T = _block_diagonal(frames)
         Wcc_nn = np.einsum("ci,cij,cj->c", problem.normal, problem.diagonal_blocks(),
                            problem.normal)
-        return _LocalOperator(frames, (T @ problem.delassus() @ T.T).tocsr(),
+        return _LocalOperator(frames, problem.delassus(frames),
                               to_local(frames, problem.free_velocity()).ravel(),
                               normal_masses(problem), Wcc_nn > 0.0)
     return problem._cached("local_operator", compute)
@@ -292,8 +294,8 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
     r = to_local(frames, P).ravel()
     r[np.repeat(~movable, d)] = 0.0
 
-    def evaluate(r):
-        u = (q + W @ r).reshape(n, d)
+    def evaluate(r, u=None):
+        u = (q + W @ r).reshape(n, d) if u is None else u
         return u, _alart_curnier(r.reshape(n, d), u, bias, mu, rho, movable, threshold)
 
     def measure(r, u, lin):
@@ -314,11 +316,13 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
            and iterations - progress[1] < STAGNATION_ITERATIONS):
         iterations += 1
         dr = _newton_step(lin, rho, W)
+        with np.errstate(over="ignore", invalid="ignore"):
+            du = (W @ dr).reshape(n, d)  # w is affine in r: the trials need no product
         step = 1.0
         for _ in range(LINE_SEARCH_HALVINGS):
             r_try = r + step * dr
             with np.errstate(over="ignore", invalid="ignore"):  # a near-singular J's step
-                u_try, lin_try = evaluate(r_try)
+                u_try, lin_try = evaluate(r_try, u + step * du)
                 merit_try = 0.5 * float(np.sum(lin_try.phi ** 2))
             if merit_try <= (1.0 - 1e-4 * step) * merit:  # False when not finite
                 break
