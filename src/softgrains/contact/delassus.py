@@ -34,11 +34,19 @@ def _touches_of_contacts(n, contact):
 
 @njit(cache=True)
 def _block_rows(n, contact, slot_start, slot_end, first, second):
-    """indptr and sorted block columns of W's block rows (contacts sharing a body)."""
+    """indptr and sorted block columns of W's block rows (contacts sharing a body): the
+    touches of contact c's bodies, each other contact once."""
+    bound = np.zeros(n + 1, np.int64)
+    for c in range(n):
+        for t in (first[c], second[c]):
+            if t >= 0:
+                bound[c + 1] += slot_end[t] - slot_start[t]
+    bound = np.cumsum(bound)
+    columns = np.empty(bound[-1], np.int64)
+    indptr = np.zeros(n + 1, np.int64)
     mark = -np.ones(n, np.int64)
-    count = np.zeros(n + 1, np.int64)
     for c in range(n):
-        k = 0
+        k = bound[c]
         for t in (first[c], second[c]):
             if t < 0:
                 continue
@@ -46,23 +54,13 @@ def _block_rows(n, contact, slot_start, slot_end, first, second):
                 other = contact[j]
                 if mark[other] != c:
                     mark[other] = c
+                    columns[k] = other
                     k += 1
-        count[c + 1] = k
-    indptr = np.cumsum(count)
+        columns[bound[c]:k] = np.sort(columns[bound[c]:k])
+        indptr[c + 1] = indptr[c] + k - bound[c]
     indices = np.empty(indptr[-1], np.int64)
-    mark[:] = -1
     for c in range(n):
-        k = indptr[c]
-        for t in (first[c], second[c]):
-            if t < 0:
-                continue
-            for j in range(slot_start[t], slot_end[t]):
-                other = contact[j]
-                if mark[other] != c:
-                    mark[other] = c
-                    indices[k] = other
-                    k += 1
-        indices[indptr[c]:indptr[c + 1]] = np.sort(indices[indptr[c]:indptr[c + 1]])
+        indices[indptr[c]:indptr[c + 1]] = columns[bound[c]:bound[c] + indptr[c + 1] - indptr[c]]
     return indptr, indices
 
 
