@@ -257,6 +257,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                    max_iterations=settings.solver_iterations, floor=floor)
     done = {i: b.converged(limit=False) for i, b in steps.items()}
     failed_solves = 0
+    actual = None  # the relative velocities at the bodies' iterate (after a first update)
     in_contact = set(slots.bodies)
     for k in range(1, settings.max_iterations + 1):
         # the Newton direction of every body not converged, with the current impulses
@@ -271,7 +272,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # methods): the bodies' next iterate changes the problem anyway. The fallbacks
         # after a stalled Newton presume a monotone problem (W PSD; Tresca too)
         tolerance = max(options.tolerance, FORCING * residual_norm(problem, P, floor=floor))
-        switchable = not psd and any(
+        switchable = not psd and options.method == "newton" and any(
             not ok and steps[b].settings.tangent == "auto" and not steps[b].projected
             for b, ok in zip(slots.bodies, slots.semidefinite, strict=True))
         result = solve(problem, P, replace(
@@ -279,14 +280,15 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             max_iterations=(min(options.max_iterations, INDEFINITE_NEWTON_ITERATIONS)
                             if switchable else options.max_iterations)))
         failed = result.residual > max(settings.tolerance, tolerance)
-        failed_solves += failed
         if failed and switchable:
             # a stalled solve on an indefinite W (seen at 450-690 iterations a solve in a
             # dense compaction, with the fallbacks): those bodies take the projected
-            # tangent and the iteration is redone
+            # tangent and the iteration is redone (not counted as a failed solve: that
+            # would switch every body at the next one)
             for i in _switch_indefinite(steps, slots):
                 done[i] = False
             continue
+        failed_solves += failed
         if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k == AUTO_TANGENT_ITERATIONS:
             # tangent = "auto": an exact tangent can make W indefinite under compression
             # (the contact problem then has no unique solution) or converge slowly: the

@@ -329,7 +329,9 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
             step *= 0.5
         if not np.isfinite(merit_try):
             break  # no finite trial along the direction: the best iterate stands
-        r, u, lin, merit = r_try, u_try, lin_try, merit_try
+        r = r_try  # its velocities without the trial's round-off (W dr may be huge along
+        u, lin = evaluate(r)  # W's null directions)
+        merit = 0.5 * float(np.sum(lin.phi ** 2))
         residual = measure(r, u, lin)
         history.append(residual)
         if residual < best[0]:
