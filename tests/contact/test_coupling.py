@@ -148,14 +148,10 @@ class _Body:
     exact tangent and the identity with the projected one."""
 
     def __init__(self, exact):
-        self.exact, self.projected, self.directions = np.asarray(exact, float), False, 0
+        self.exact, self.projected = np.asarray(exact, float), False
 
     def contact_response(self, rows, delassus):
         return None, np.eye(2) if self.projected else self.exact
-
-    def newton_direction(self, direct=False):
-        self.directions += 1
-        return np.zeros(1)
 
     def use_projected_tangent(self):
         switched, self.projected = not self.projected, True

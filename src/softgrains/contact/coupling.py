@@ -69,12 +69,12 @@ from softgrains.grid.lattice import Lattice
 IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
 AUTO_TANGENT_ITERATIONS = 10  # tangent = "auto": projected after this many iterations
 AUTO_TANGENT_FAILED_SOLVES = 2  # ... or after this many unconverged contact solves
-INDEFINITE = 1e-9  # a body's W with an eigenvalue below −this × its largest diagonal entry
 SOLVE_TOLERANCE_FRACTION = 0.1  # each contact solve to this fraction of the loop's tolerance
+FORCING = 0.01  # ... or to this fraction of its residual at the start, if that is larger
+INDEFINITE = 1e-9  # a body's W with an eigenvalue below −this × its largest diagonal entry
 # a solve on an indefinite W that a tangent switch can mend: Newton only, this many
 # iterations (those that converged in a dense compaction took 9-11)
 INDEFINITE_NEWTON_ITERATIONS = 20
-FORCING = 0.01  # ... or to this fraction of its residual at the start, if that is larger
 # the end-of-step gap check (end_gaps.py): a point contact whose true end gap would pass
 # below its floor, min(its start gap, −GAP_OVERLAP h), by GAP_ERROR h or more has its
 # constraint corrected by the difference and the step solved again (a fixed point on the
@@ -273,7 +273,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # after a stalled Newton presume a monotone problem (W PSD; Tresca too)
         tolerance = max(options.tolerance, FORCING * residual_norm(problem, P, floor=floor))
         switchable = not psd and options.method == "newton" and any(
-            not ok and steps[b].settings.tangent == "auto" and not steps[b].projected
+            not ok and steps[b].can_project()
             for b, ok in zip(slots.bodies, slots.semidefinite, strict=True))
         result = solve(problem, P, replace(
             options, tresca=psd, tolerance=tolerance, fallbacks=not switchable,
@@ -394,11 +394,11 @@ def _update_compliances(steps: dict, slots: Slots, du: dict, delassus: bool) -> 
 def _switch_indefinite(steps: dict, slots: Slots) -> list[int]:
     """``tangent = "auto"``: the bodies whose W_s is indefinite (an exact tangent under
     compression) take the projected tangent; their W_s is dropped. Returns them."""
-    switched = [body for slot, body in enumerate(slots.bodies)
-                if not slots.semidefinite[slot] and steps[body].use_projected_tangent()]
+    switched = []
     for slot, body in enumerate(slots.bodies):
-        if body in switched:
+        if not slots.semidefinite[slot] and steps[body].use_projected_tangent():
             slots.W[slot] = None
+            switched.append(body)
     return switched
 
 

@@ -299,10 +299,14 @@ class BodyStep:
         compression it can make the Newton matrix indefinite)."""
         return self.settings.tangent == "projected" or self._projected
 
+    def can_project(self) -> bool:
+        """Whether :meth:`use_projected_tangent` would switch (``auto``, still exact)."""
+        return self.settings.tangent == "auto" and not self._projected
+
     def use_projected_tangent(self) -> bool:
         """With ``tangent = "auto"``, switch to the projected tangent for the rest of the
         step (the iterate is kept; only the Newton matrix changes). True if it switched."""
-        if self.settings.tangent != "auto" or self._projected:
+        if not self.can_project():
             return False
         self._projected = True
         self._A = self._lu = None
