@@ -265,6 +265,55 @@ def test_per_point_wall_sites_with_a_nearly_singular_W_are_solved(tresca, monkey
         assert not solve(problem, None, options).converged
 
 
+def test_a_dense_frictional_cluster_is_solved_by_the_tresca_fixed_point():
+    """dense_frictional_cluster.npz: 234 contacts among 8 grains and the walls of the
+    frictional compaction example at 307 σ0 (μ = 0.5, D/h 10, 1691 contacts in all; the
+    first solve of a step, from the previous step's impulses, stored as ``warm_start``):
+    the contacts of 8 neighbouring grains, the impulses of the others at their solution
+    (to 1e-9) folded into the free velocities; W and V_free rounded to single precision
+    to keep the file small (2026-12-03). W is PSD, cond ~ 3e9. Measured: the Coulomb
+    Newton wanders, then cycles at 0.14 after 47 iterations; 500 Gauss–Seidel sweeps stop
+    at 2e-3; the chain before session 18 (then the proximal loop and the plain Tresca
+    fixed point) took 677 iterations. The Tresca fixed point with Anderson mixing: 69."""
+    path = DATA / "dense_frictional_cluster.npz"
+    problem = ContactProblem.load(path)
+    with np.load(path) as data:
+        start = data["warm_start"]
+    options = ContactSolverOptions(tolerance=1e-6, max_iterations=50)
+    newton = solvers._newton(problem, start, options)
+    assert not newton.converged and newton.residual > 1e-2  # what the fallback is for
+    result = solve(problem, start, options)
+    assert result.converged and residual_norm(problem, result.impulse) <= 1e-6
+    assert result.iterations <= 100  # Newton iterations in all (the 15 Coulomb ones too)
+    pn = np.einsum("ci,ci->c", result.impulse, problem.normal)
+    pt = np.linalg.norm(result.impulse - pn[:, None] * problem.normal, axis=1)
+    assert pn.min() >= 0.0 and np.all(pt <= problem.mu * pn + 1e-6 * pn.max())
+    w = problem.velocities(result.impulse)
+    gap_rate = np.einsum("ci,ci->c", w, problem.normal) + problem.bias
+    assert gap_rate.min() >= -1e-5 * np.abs(problem.free_velocity()).max()
+
+
+def test_anderson_mixing_ends_the_cycle_of_a_linear_fixed_point_iteration():
+    """x ↦ g(x) = B x + c with B's eigenvalues −1 (the plain iteration cycles between two
+    points for ever, as the Tresca bounds did on dense frictional steps), 0.9 (it creeps)
+    and 0.5: Anderson mixing of depth ≥ 3 on a linear map is GMRES on (I − B) x = c
+    (Walker & Ni 2011) and lands on the fixed point in at most 4 updates."""
+    rng = np.random.default_rng(3)
+    V = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    B = V @ np.diag([-1.0, 0.9, 0.5]) @ V.T
+    c = rng.normal(size=3)
+    fixed = np.linalg.solve(np.eye(3) - B, c)
+    plain = np.zeros(3)
+    for _ in range(50):
+        plain = B @ plain + c
+    assert np.linalg.norm(B @ plain + c - plain) > 0.05 * np.linalg.norm(fixed)  # cycling
+    mixing = solvers._AndersonMixing(depth=5)
+    x = np.zeros(3)
+    for _ in range(4):
+        x = mixing.next(x, B @ x + c - x)
+    np.testing.assert_allclose(x, fixed, rtol=1e-9)
+
+
 @pytest.mark.parametrize("d", [2, 3])
 def test_assembled_delassus_is_the_map_from_impulses_to_velocities(d):
     """W (delassus.py, in global axes and in the contact frames) against its definition,
