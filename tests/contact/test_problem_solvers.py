@@ -315,6 +315,36 @@ def test_anderson_mixing_ends_the_cycle_of_a_linear_fixed_point_iteration():
 
 
 @pytest.mark.parametrize("d", [2, 3])
+def test_the_newton_matrix_on_the_engaged_rows_is_the_generalized_jacobian(d):
+    """newton_matrix.engaged_jacobian against J = I − G + G ρ (W + εI) written out densely:
+    J_EE and J_EO dr_O for a random block-sparse W (two contacts not coupled), random G
+    blocks on the engaged contacts, one contact with only some components engaged."""
+    from scipy import sparse
+
+    from softgrains.contact.newton_matrix import engaged_jacobian
+
+    rng = np.random.default_rng(7)
+    n = 5
+    pattern = np.ones((n, n), bool)
+    pattern[0, 3] = pattern[3, 0] = False
+    blocks = sparse.bsr_matrix(np.kron(pattern, np.ones((d, d))) * rng.normal(
+        size=(n * d, n * d)), blocksize=(d, d))
+    G = rng.normal(size=(n, d, d))
+    G[1] = 0.0  # an open contact
+    G[2, 1:] = 0.0  # only its normal row engaged
+    rho, dr, shift = rng.uniform(0.5, 2.0, n), rng.normal(size=n * d), 0.3
+    dense = (np.eye(n * d) - sparse.block_diag(list(G)).toarray()
+             + sparse.block_diag(list(G * rho[:, None, None])).toarray()
+             @ (blocks.toarray() + shift * np.eye(n * d)))
+    engaged = np.flatnonzero(np.any(G.reshape(n * d, d) != 0.0, axis=1))
+    other = np.setdiff1d(np.arange(n * d), engaged)
+    J_ee, coupling = engaged_jacobian(blocks, G, rho, engaged, dr, shift)
+    np.testing.assert_allclose(J_ee.toarray(), dense[np.ix_(engaged, engaged)], atol=1e-12)
+    np.testing.assert_allclose(coupling, dense[np.ix_(engaged, other)] @ dr[other],
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("d", [2, 3])
 def test_assembled_delassus_is_the_map_from_impulses_to_velocities(d):
     """W (delassus.py, in global axes and in the contact frames) against its definition,
     the columns w(e_j) − w(0) of the problem's own velocity map: three bodies, two contacts

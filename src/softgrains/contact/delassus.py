@@ -101,12 +101,13 @@ def _block_values(contact, slot_start, slot_end, first, second, col, sign, base,
 
 def assemble(contact: np.ndarray, slot: np.ndarray, col: np.ndarray, sign: np.ndarray,
              W: np.ndarray, w_off: np.ndarray, k_size: np.ndarray,
-             frames: np.ndarray) -> sp.csr_matrix:
-    """W in the given frames (n d × n d CSR, (contact, component) order) from the touches
-    (contact, body slot, column, sign), grouped by slot as ContactProblem.touches gives."""
+             frames: np.ndarray) -> sp.bsr_matrix:
+    """W in the given frames (n d × n d, (contact, component) order; d × d blocks, every
+    diagonal block present) from the touches (contact, body slot, column, sign), grouped
+    by slot as ContactProblem.touches gives."""
     n, d = frames.shape[0], frames.shape[1]
     if contact.size == 0:
-        return sp.csr_matrix((n * d, n * d))
+        return sp.bsr_matrix((n * d, n * d), blocksize=(d, d))
     slot_start = np.searchsorted(slot, slot, side="left")
     slot_end = np.searchsorted(slot, slot, side="right")
     first, second = _touches_of_contacts(n, contact)
@@ -115,4 +116,4 @@ def assemble(contact: np.ndarray, slot: np.ndarray, col: np.ndarray, sign: np.nd
                          np.asarray(sign, float), w_off[slot], k_size[slot] * d,
                          np.ascontiguousarray(W, float), np.ascontiguousarray(frames, float),
                          indptr, indices)
-    return sp.bsr_matrix((data, indices, indptr), shape=(n * d, n * d)).tocsr()
+    return sp.bsr_matrix((data, indices, indptr), shape=(n * d, n * d))

@@ -123,9 +123,9 @@ class ContactProblem:
         order = np.argsort(slot, kind="stable")
         return contact[order], slot[order], col[order], sign[order]
 
-    def delassus(self, frames: np.ndarray | None = None) -> sp.csr_matrix:
-        """W (n d × n d, (contact, component) order): w = q + W P, in global axes or, with
-        ``frames`` (n, d, d), in those contact frames (delassus.py).
+    def delassus(self, frames: np.ndarray | None = None) -> sp.bsr_matrix:
+        """W (n d × n d, (contact, component) order, d × d blocks): w = q + W P, in global
+        axes or, with ``frames`` (n, d, d), in those contact frames (delassus.py).
 
         W_cc' = Σ_s σ_c σ_c' W_s[col_c, col_c'] over the bodies s that both contacts touch
         (σ = +1 on the α side, −1 on the β side).

@@ -38,6 +38,7 @@ import scipy.sparse.linalg as spla
 
 from softgrains.contact.gauss_seidel import gauss_seidel
 from softgrains.contact.local_law import OPEN, SLIP, STICK
+from softgrains.contact.newton_matrix import engaged_jacobian
 from softgrains.contact.problem import (
     ContactProblem,
     normal_masses,
@@ -218,33 +219,22 @@ def _alart_curnier(r: np.ndarray, u: np.ndarray, bias: np.ndarray, mu: np.ndarra
     return _Linearised(phi, G)
 
 
-def _block_diagonal(blocks: np.ndarray) -> sp.csr_matrix:
-    n, d, _ = blocks.shape
-    rows = (np.arange(n)[:, None, None] * d + np.arange(d)[None, :, None]
-            + np.zeros((1, 1, d), np.int64))
-    cols = (np.arange(n)[:, None, None] * d + np.arange(d)[None, None, :]
-            + np.zeros((1, d, 1), np.int64))
-    return sp.csr_matrix((blocks.ravel(), (rows.ravel(), cols.ravel())), shape=(n * d, n * d))
-
-
-def _newton_step(lin: _Linearised, rho: np.ndarray, W: sp.csr_matrix) -> np.ndarray:
-    """dr solving J dr = −Φ, J = I − G + G ρ W. A row where G vanishes (an open contact's
-    components) is a row of the identity, dr_i = −Φ_i: only the engaged rows E need a
-    factorization, J_EE dr_E = −Φ_E − J_EO dr_O (most contacts of a dense packing are open:
-    with B-splines the LU of the whole J took 77% of a frictional compaction step)."""
+def _newton_step(lin: _Linearised, rho: np.ndarray, blocks: sp.bsr_matrix,
+                 shift: float = 0.0) -> np.ndarray:
+    """dr solving J dr = −Φ, J = I − G + G ρ (W + shift I). A row where G vanishes (an open
+    contact's components) is a row of the identity, dr_i = −Φ_i: only the engaged rows E
+    need a factorization, J_EE dr_E = −Φ_E − J_EO dr_O (newton_matrix.py; most contacts
+    of a dense packing are open: with B-splines the LU of the whole J took 77% of a
+    frictional compaction step)."""
     n, d, _ = lin.G.shape
     dr = -lin.phi.ravel()
     engaged = np.flatnonzero(np.any(lin.G.reshape(n * d, d) != 0.0, axis=1))
     if engaged.size == 0:
         return dr
-    open_ = np.setdiff1d(np.arange(n * d), engaged, assume_unique=True)
-    G = _block_diagonal(lin.G)[engaged]
-    J = (sp.identity(n * d, format="csr")[engaged] - G
-         + G @ sp.diags(np.repeat(rho, d)) @ W).tocsc()
-    J_ee = J[:, engaged]
-    rhs = dr[engaged] - J[:, open_] @ dr[open_]
-    try:
-        step = spla.splu(J_ee).solve(rhs)
+    J_ee, coupling = engaged_jacobian(blocks, lin.G, rho, engaged, dr, shift)
+    rhs = dr[engaged] - coupling
+    try:  # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
+        step = spla.splu(J_ee.T).solve(rhs, trans="T")
     except RuntimeError:
         step = None
     if step is None or not np.all(np.isfinite(step)):
@@ -260,7 +250,8 @@ class _LocalOperator:
     """The problem in its contacts' frames: w = q + W r (flat, (contact, component))."""
 
     frames: np.ndarray
-    W: sp.csr_matrix
+    blocks: sp.bsr_matrix  # W by d × d blocks (the Newton matrix's kernel reads them)
+    W: sp.csr_matrix  # the same, for products
     q: np.ndarray
     rho: np.ndarray
     movable: np.ndarray  # contacts some body can move at (W_cc,nn > 0)
@@ -271,7 +262,8 @@ def _local_operator(problem: ContactProblem) -> _LocalOperator:
         frames = problem.frames()
         Wcc_nn = np.einsum("ci,cij,cj->c", problem.normal, problem.diagonal_blocks(),
                            problem.normal)
-        return _LocalOperator(frames, problem.delassus(frames),
+        blocks = problem.delassus(frames)
+        return _LocalOperator(frames, blocks, blocks.tocsr(),
                               to_local(frames, problem.free_velocity()).ravel(),
                               normal_masses(problem), Wcc_nn > 0.0)
     return problem._cached("local_operator", compute)
@@ -294,10 +286,11 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
     n, d = problem.n_contacts, problem.dim
     op = _local_operator(problem)
     frames, movable, rho = op.frames, op.movable, op.rho
-    W, q = op.W, op.q
+    W, q, shift = op.W, op.q, 0.0
     if proximal is not None:
-        W = (W + proximal.epsilon * sp.identity(n * d, format="csr")).tocsr()
-        q = q - proximal.epsilon * proximal.centre
+        shift = proximal.epsilon
+        W = (W + shift * sp.identity(n * d, format="csr")).tocsr()
+        q = q - shift * proximal.centre
     own_residual = threshold is not None or proximal is not None
     mu, bias = problem.mu, problem.bias
     r = to_local(frames, P).ravel()
@@ -324,7 +317,7 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
     while (residual > options.tolerance and iterations < options.max_iterations
            and iterations - progress[1] < STAGNATION_ITERATIONS):
         iterations += 1
-        dr = _newton_step(lin, rho, W)
+        dr = _newton_step(lin, rho, op.blocks, shift)
         with np.errstate(over="ignore", invalid="ignore"):
             du = (W @ dr).reshape(n, d)  # w is affine in r: the trials need no product
         step = 1.0
