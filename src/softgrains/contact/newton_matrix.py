@@ -61,9 +61,11 @@ def _engaged_rows(indptr, indices, blocks, G, rho, shift, engaged, position, dr)
 
 def engaged_jacobian(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, engaged: np.ndarray,
                      dr: np.ndarray, shift: float = 0.0) -> tuple[sp.csr_matrix, np.ndarray]:
-    """(J_EE, J_EO dr_O) of J = I − G + G ρ (W + shift I): W as d × d block rows (BSR,
-    the diagonal blocks present), G (n, d, d), ρ (n,), the engaged rows E (sorted), dr
-    the step's values on the other rows (only dr_O is read)."""
+    """(J_EE, J_EO dr_O) of J = I − G + G ρ (W + shift I): W as d × d block rows (BSR),
+    G (n, d, d), ρ (n,), the engaged rows E (sorted), dr the step's values on the other
+    rows (only dr_O is read). An engaged contact's block row must hold its diagonal block
+    (the I − G terms are added there): engaged rows are movable (G vanishes where
+    W_cc,nn = 0), and a contact touching a body is in its own block row (delassus.py)."""
     n, d = G.shape[0], G.shape[1]
     position = -np.ones(n * d, np.int64)
     position[engaged] = np.arange(engaged.size)

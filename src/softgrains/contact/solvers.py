@@ -18,8 +18,9 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   sample, W singular — that can take 20–40 iterations whose best residual stalls for ten
   while the merit still falls: it stops only when ½‖Φ‖² has not fallen by 1% in
   STAGNATION_ITERATIONS). With friction it can stall or cycle (no global convergence for
-  the non-associated Coulomb law). Then, where ``options.tresca`` allows it (a symmetric
-  PSD W), the **Tresca fixed point** from the initial guess: the friction bound s = μ P_n
+  the non-associated Coulomb law): where ``options.tresca`` allows it (a symmetric PSD W)
+  it gets FRICTIONAL_NEWTON_ITERATIONS, then the **Tresca fixed point** from the initial
+  guess: the friction bound s = μ P_n
   held, the Tresca problem (monotone for a symmetric PSD W) solved by the same Newton, s
   updated with Anderson mixing; then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps from
   the best iterate, then the **proximal point** loop (W + εI, well posed where redundant
@@ -70,18 +71,19 @@ PROXIMAL_FAILED_INNER = 2  # ... or after this many regularised problems left un
 @dataclass(frozen=True)
 class ContactSolverOptions:
     """``method``: newton | nsgs; ``tolerance``: on the relative natural-map residual;
-    ``max_iterations``: Newton iterations or Gauss–Seidel sweeps; ``floor``: an impulse
-    below which the relative residual is measured against the floor instead; ``tresca``:
-    whether a stalled Newton may end with the Tresca fixed point (its Tresca problems are
-    monotone only for a symmetric PSD W: not with an exact tangent under compression);
-    ``fallbacks``: whether a stalled Newton goes on with them at all (the caller can
-    instead change an indefinite W)."""
+    ``max_iterations``: Newton iterations or Gauss–Seidel sweeps (with friction, ``tresca``
+    and ``fallbacks`` the Coulomb Newton stops at FRICTIONAL_NEWTON_ITERATIONS, then the
+    Tresca fixed point); ``floor``: an impulse below which the relative residual is
+    measured against the floor instead; ``tresca``: whether a stalled Newton goes on with
+    the Tresca fixed point (its Tresca problems are monotone only for a symmetric PSD W:
+    not with an exact tangent under compression); ``fallbacks``: whether a stalled Newton
+    goes on with any fallback at all (the caller can instead change an indefinite W)."""
 
     method: str = "newton"
     tolerance: float = 1e-6
     max_iterations: int = 50
     floor: float = 0.0
-    tresca: bool = True  # the Tresca fixed point as the last fallback (needs W symmetric PSD)
+    tresca: bool = True  # the Tresca fixed point as the first fallback (needs W symmetric PSD)
     fallbacks: bool = True  # after a stalled Newton (they presume a monotone problem)
 
     def __post_init__(self) -> None:
