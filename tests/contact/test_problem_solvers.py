@@ -239,6 +239,16 @@ def test_redundant_surface_sites_at_a_quasi_static_step_are_solved(mu):
     assert gap_rate.min() >= -1e-4 * scale  # no contact closes past its gap
 
 
+def _assert_signorini_coulomb(problem, P, cone, closing):
+    """P_n ≥ 0, ‖P_t‖ ≤ μ P_n + cone × max P_n, and no contact closes faster than
+    closing × the largest free velocity (w_n + b ≥ −that)."""
+    pn = np.einsum("ci,ci->c", P, problem.normal)
+    pt = np.linalg.norm(P - pn[:, None] * problem.normal, axis=1)
+    assert pn.min() >= 0.0 and np.all(pt <= problem.mu * pn + cone * pn.max())
+    gap_rate = np.einsum("ci,ci->c", problem.velocities(P), problem.normal) + problem.bias
+    assert gap_rate.min() >= -closing * np.abs(problem.free_velocity()).max()
+
+
 @pytest.mark.parametrize("tresca", [False, True])
 def test_per_point_wall_sites_with_a_nearly_singular_W_are_solved(tresca, monkeypatch):
     """per_point_wall_sites.npz: 106 contacts of a disk sliding on a grain (μ = 1 on its 94
@@ -256,12 +266,7 @@ def test_per_point_wall_sites_with_a_nearly_singular_W_are_solved(tresca, monkey
     options = ContactSolverOptions(tolerance=1e-6, max_iterations=50, tresca=tresca)
     result = solve(problem, None, options)
     assert result.converged and residual_norm(problem, result.impulse) <= 1e-6
-    pn = np.einsum("ci,ci->c", result.impulse, problem.normal)
-    pt = np.linalg.norm(result.impulse - pn[:, None] * problem.normal, axis=1)
-    assert pn.min() >= 0.0 and np.all(pt <= problem.mu * pn + 1e-6 * pn.max())
-    w = problem.velocities(result.impulse)
-    gap_rate = np.einsum("ci,ci->c", w, problem.normal) + problem.bias
-    assert gap_rate.min() >= -1e-5 * np.abs(problem.free_velocity()).max()
+    _assert_signorini_coulomb(problem, result.impulse, 1e-6, 1e-5)
     if not tresca:  # what the fallback is for: without it the solve stops short
         monkeypatch.setattr(solvers, "PROXIMAL_ITERATIONS", 0)
         assert not solve(problem, None, options).converged
@@ -287,12 +292,7 @@ def test_a_dense_frictional_cluster_is_solved_by_the_tresca_fixed_point():
     result = solve(problem, start, options)
     assert result.converged and residual_norm(problem, result.impulse) <= 1e-6
     assert result.iterations <= 100  # Newton iterations and sweeps in all
-    pn = np.einsum("ci,ci->c", result.impulse, problem.normal)
-    pt = np.linalg.norm(result.impulse - pn[:, None] * problem.normal, axis=1)
-    assert pn.min() >= 0.0 and np.all(pt <= problem.mu * pn + 1e-6 * pn.max())
-    w = problem.velocities(result.impulse)
-    gap_rate = np.einsum("ci,ci->c", w, problem.normal) + problem.bias
-    assert gap_rate.min() >= -1e-5 * np.abs(problem.free_velocity()).max()
+    _assert_signorini_coulomb(problem, result.impulse, 1e-6, 1e-5)
 
 
 def test_anderson_mixing_ends_the_cycle_of_a_linear_fixed_point_iteration():

@@ -366,26 +366,19 @@ def _tresca_fixed_point(problem: ContactProblem, P: np.ndarray,
     same problems reach 1e-5 in 12-15 updates. Starts from P; returns its best iterate."""
     inner = replace(options, tolerance=TRESCA_TOLERANCE_FRACTION * options.tolerance)
     mixing = _AndersonMixing(TRESCA_MIXING_DEPTH)
+    bound = None  # the friction bound of the last Tresca problem
+
+    def tresca(P):
+        nonlocal bound
+        target = _friction_bound(problem, P)
+        bound = target if bound is None else np.maximum(
+            mixing.next(bound, target - bound), 0.0)
+        return _newton(problem, P, inner, threshold=bound)
+
     best = ContactResult(P, contact_status(problem, P), 0,
                          residual_norm(problem, P, floor=options.floor), False)
-    bound = _friction_bound(problem, P)
-    iterations, history, best_at = 0, [], 0
-    for k in range(1, TRESCA_ITERATIONS + 1):
-        step = _newton(problem, P, inner, threshold=bound)
-        iterations += step.iterations
-        if not np.all(np.isfinite(step.impulse)):
-            break
-        P = step.impulse
-        residual = residual_norm(problem, P, floor=options.floor)
-        history.append(residual)
-        if residual < best.residual:
-            best = ContactResult(P, step.status, iterations, residual,
-                                 residual <= options.tolerance)
-            best_at = k
-        if residual <= options.tolerance or k - best_at >= TRESCA_STAGNATION:
-            break
-        bound = np.maximum(mixing.next(bound, _friction_bound(problem, P) - bound), 0.0)
-    return replace(best, iterations=iterations, history=history)
+    return _fixed_point(problem, P, best, options, tresca, TRESCA_ITERATIONS,
+                        TRESCA_STAGNATION)
 
 
 class _AndersonMixing:
