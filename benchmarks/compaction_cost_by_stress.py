@@ -23,19 +23,11 @@ from softgrains.io import read_table
 
 
 def _sigma0(case_file: Path) -> float:
-    """The protocol's σ0 from a run's case.toml (the first key named sigma0)."""
-    def find(table):
-        for key, value in table.items():
-            if key == "sigma0":
-                return float(value)
-            if isinstance(value, dict) and (found := find(value)) is not None:
-                return found
-        return None
-
-    value = find(tomllib.loads(case_file.read_text()))
-    if value is None:
-        raise SystemExit(f"{case_file}: no sigma0 (not a compaction run)")
-    return value
+    """The protocol's σ0 from a run's case.toml (as compaction_overlap.py reads it)."""
+    protocol = tomllib.loads(case_file.read_text()).get("protocol", {})
+    if "sigma0" not in protocol:
+        raise SystemExit(f"{case_file}: no [protocol] sigma0 (not a compaction run)")
+    return float(protocol["sigma0"])
 
 
 def band_costs(run: Path, bands: list[float]) -> list[dict | None]:

@@ -69,7 +69,6 @@ def engaged_jacobian(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, engaged: 
     n, d = G.shape[0], G.shape[1]
     position = -np.ones(n * d, np.int64)
     position[engaged] = np.arange(engaged.size)
-    row_ptr, cols, data, coupling = _engaged_rows(
-        W.indptr.astype(np.int64), W.indices.astype(np.int64), W.data, G, rho, float(shift),
-        engaged.astype(np.int64), position, dr)
+    row_ptr, cols, data, coupling = _engaged_rows(  # W's own index arrays (int32 or 64)
+        W.indptr, W.indices, W.data, G, rho, float(shift), engaged, position, dr)
     return sp.csr_matrix((data, cols, row_ptr), shape=(engaged.size, engaged.size)), coupling
