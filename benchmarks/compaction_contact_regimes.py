@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from contact_regimes import StepTally
 from squeeze_convergence import print_table
 
 from softgrains import Simulation, checkpointing, load_case
@@ -94,8 +95,8 @@ def regime(sim: Simulation, dt_c_over_h: float, steps: int) -> dict:
     """``steps`` steps at Δt c/h from the state of ``sim`` (changed in place)."""
     h = sim.model.lattice.h
     speed = set_regime(sim, dt_c_over_h)
-    its, solver_its, seconds, gaps = [], [], [], []
-    unconverged, retried, failure = 0, sim.retried_steps, ""
+    tally, seconds = StepTally(h), []
+    retried, failure = sim.retried_steps, ""
     before = _energy(sim)
     for _ in range(steps):
         start = time.perf_counter()
@@ -105,23 +106,18 @@ def regime(sim: Simulation, dt_c_over_h: float, steps: int) -> dict:
             failure = str(error).splitlines()[0]
             break
         seconds.append(time.perf_counter() - start)
-        its.append(diag.contact.iterations)
-        solver_its.append(diag.contact.sweeps)
-        unconverged += not diag.contact.converged
-        active = np.any(diag.contacts.impulse != 0.0, axis=1)
-        if active.any():
-            gaps.append(float(diag.contacts.gap[active].min()) / h)
+        tally.add(diag)
     stored, work, contacts, integrator = _energy(sim) - before
     share = (lambda x: x / work) if work > 0.0 else (lambda x: float("nan"))
-    row = {"dt c/h": dt_c_over_h, "wall m/s": speed,
-           "its/step": f"{np.mean(its):.1f} / {max(its)}" if its else "-",
-           "solver its/step": float(np.mean(solver_its)) if its else float("nan"),
-           "s/step": f"{np.mean(seconds):.3g} / {max(seconds):.3g}" if its else "-",
-           "retried": sim.retried_steps - retried, "unconverged": unconverged,
-           "least gap [h]": min(gaps) if gaps else float("nan"),
+    columns = tally.columns()
+    row = {"dt c/h": dt_c_over_h, "wall m/s": speed, "its/step": columns["its/step"],
+           "solver its/step": columns["solver its/step"],
+           "s/step": f"{np.mean(seconds):.3g} / {max(seconds):.3g}" if seconds else "-",
+           "retried": sim.retried_steps - retried, "unconverged": columns["unconverged"],
+           "least gap [h]": columns["least gap [h]"],
            "ΔE/W": share(stored), "D_c/W": share(contacts), "D_int/W": share(integrator)}
     if failure:
-        row["s/step"] = f"stopped after {len(its)}: {failure}"
+        row["s/step"] = f"stopped after {len(seconds)}: {failure}"
     return row
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 from squeeze_convergence import R, print_table, squeeze_case, wave_speed
@@ -25,6 +26,34 @@ from softgrains import Simulation, checkpointing, load_case
 
 REGIMES = (0.1, 1.0, 10.0, 100.0, 1e4)
 PRESQUEEZE = 0.10  # of D, before the regimes start
+
+
+@dataclass
+class StepTally:
+    """What the regime tables report of each step: coupling iterations, contact-solver
+    iterations, unconverged steps, the least gap at the active contacts (in cells h)."""
+
+    h: float
+    iterations: list[int] = field(default_factory=list)
+    solver_iterations: list[int] = field(default_factory=list)
+    unconverged: int = 0
+    gaps: list[float] = field(default_factory=list)
+
+    def add(self, diag) -> None:
+        self.iterations.append(diag.contact.iterations)
+        self.solver_iterations.append(diag.contact.sweeps)
+        self.unconverged += not diag.contact.converged
+        active = np.any(diag.contacts.impulse != 0.0, axis=1)
+        if active.any():
+            self.gaps.append(float(diag.contacts.gap[active].min()) / self.h)
+
+    def columns(self) -> dict:
+        its = self.iterations
+        return {"its/step": f"{np.mean(its):.1f} / {max(its)}" if its else "-",
+                "solver its/step": float(np.mean(self.solver_iterations)) if its
+                else float("nan"),
+                "unconverged": self.unconverged,
+                "least gap [h]": min(self.gaps) if self.gaps else float("nan")}
 
 
 def presqueezed(d_over_h: int, friction: float, shape: str) -> Simulation:
@@ -45,21 +74,15 @@ def regime(sim: Simulation, dt_c_over_h: float, steps: int) -> dict:
     sim.dt = dt
     sim.state.body_velocity[1][:] = (0.0, speed)
     sim.state.body_velocity[2][:] = (0.0, -speed)
-    its, solver_its, unconverged, gaps = [], [], 0, []
+    tally = StepTally(h)
     t0 = time.perf_counter()
     for _ in range(steps):
-        diag = sim.step()
-        its.append(diag.contact.iterations)
-        solver_its.append(diag.contact.sweeps)
-        unconverged += not diag.contact.converged
-        active = np.any(diag.contacts.impulse != 0.0, axis=1)
-        if active.any():
-            gaps.append(float(diag.contacts.gap[active].min()) / h)
+        tally.add(sim.step())
     wall = (time.perf_counter() - t0) / steps
-    return {"dt c/h": dt_c_over_h, "its/step": f"{np.mean(its):.1f} / {max(its)}",
-            "solver its/step": float(np.mean(solver_its)), "s/step": wall,
-            "unconverged": unconverged,
-            "least gap [h]": min(gaps) if gaps else float("nan")}
+    columns = tally.columns()
+    return {"dt c/h": dt_c_over_h, "its/step": columns["its/step"],
+            "solver its/step": columns["solver its/step"], "s/step": wall,
+            "unconverged": columns["unconverged"], "least gap [h]": columns["least gap [h]"]}
 
 
 def main() -> None:
