@@ -49,7 +49,7 @@ from softgrains.observe.stress import project_per_grain, von_mises
 from softgrains.protocol import UniaxialCompaction
 from softgrains.solver import Solver, StepDiagnostics
 
-RETRYABLE = {"nan", "inverted", "newton", "contact"}  # failures a smaller Δt may cure
+RETRYABLE = {"nan", "inverted", "newton", "contact", "motion"}  # a smaller Δt may cure
 GROW_AFTER_STEPS = 5  # converged steps in a row before the controller doubles Δt again
 SERIES_COLUMNS = [
     "step", "time", "dt", "newton_iterations", "contact_iterations", "contact_residual",
@@ -175,15 +175,21 @@ class Simulation:
         cure is undone and retried with Δt halved, down to the nominal Δt / 2^k with
         k = ``simulation.retry_halvings``; after ``GROW_AFTER_STEPS`` steps in a row that
         succeed, Δt is doubled again, up to the nominal Δt. Each change is noted in
-        ``retry_events`` (logged by run()) and counted in summary.json."""
+        ``retry_events`` (logged by run()) and counted in summary.json. A step that would
+        move a grain's point more than ``max_step_motion`` cells is shortened as many
+        halvings as that takes: before it, as far as the grains' velocities tell
+        (:meth:`_shorten_for_velocities`), and after it, by the motion it made."""
         halvings = self.case.simulation.retry_halvings
+        self._shorten_for_velocities(halvings)
         saved = checkpointing.snapshot(self) if halvings else None
         while True:
             try:
                 dg = self._advance(self.dt_factor)
             except SimulationError as error:
-                factor = 0.5 * self.dt_factor
-                if factor < 0.5 ** halvings or error.diagnosis.get("kind") not in RETRYABLE:
+                kind = error.diagnosis.get("kind")
+                cuts = _halvings_for(error.diagnosis["motion"]) if kind == "motion" else 1
+                factor = max(self.dt_factor * 0.5 ** cuts, 0.5 ** halvings)
+                if factor >= self.dt_factor or kind not in RETRYABLE:
                     raise
                 rows, retried = self._rows, self.retried_steps + 1
                 smallest = min(self.smallest_dt_factor, factor)
@@ -205,6 +211,28 @@ class Simulation:
                     f"{self.dt_factor:g} from here (step-size controller)")
             return dg
 
+    def _shorten_for_velocities(self, halvings: int) -> None:
+        """Halve Δt before the step, within ``retry_halvings``, while the grains' current
+        velocities would carry a point farther than ``max_step_motion`` cells:
+        max_p |v_p| Δt ≤ max_step_motion h (u = Δt v for a point in free flight, e.g. a
+        rattler spinning after a rearrangement). Noted in ``retry_events``."""
+        grains = self.model.deformable_points
+        if not halvings or not grains.size or len(self.model.bodies) < 2:
+            return
+        dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        speed = float(np.sqrt(np.einsum("ij,ij->i", self.state.v[grains],
+                                        self.state.v[grains]).max()))
+        reach = self.case.simulation.max_step_motion * self.model.lattice.h
+        cuts = _halvings_for(speed * dt * self.dt_factor / reach)
+        factor = max(self.dt_factor * 0.5 ** cuts, 0.5 ** halvings)
+        if factor < self.dt_factor:
+            self.dt_factor, self.steps_at_factor = factor, 0
+            self.smallest_dt_factor = min(self.smallest_dt_factor, factor)
+            self.retry_events.append(
+                f"step {self.state.step}: a grain moving at {speed:.3g} m/s would cross "
+                f"{speed * dt / self.model.lattice.h:.3g} cells at the nominal dt: dt x "
+                f"{factor:g} (step-size controller, [simulation] max_step_motion)")
+
     def _advance(self, factor: float) -> StepDiagnostics:
         """The step itself, with the nominal Δt times ``factor``."""
         if self.protocol is not None:
@@ -212,6 +240,8 @@ class Simulation:
         dt = self.protocol.time_step() if self.protocol is not None else self.dt
         dt = self.last_dt = dt * factor
         step = self.state.step
+        grains = self.model.deformable_points
+        x_start = self.state.x[grains]
         try:
             dg = self.last_diagnostics = self.solver.step(self.state, dt)
         except MemoryError:
@@ -228,6 +258,7 @@ class Simulation:
                 f"step {step}: non-finite position or velocity of point "
                 f"{p - body.points.start} of body '{body.name}'; try a smaller dt or a finer "
                 "grid.", kind="nan", step=step, body=body.name, point=p - body.points.start)
+        self._check_motion(step, grains, x_start)
         if not dg.contact.converged:
             self.unconverged_contact_steps += 1
         self.wall_work += dg.contact.wall_work + sum(r.prescribed_work
@@ -247,6 +278,28 @@ class Simulation:
                                m.vol0[grains])
             self._protocol_row = self.protocol.after_step(s, forces, dg.contacts, ek, es)
         return dg
+
+    def _check_motion(self, step: int, grains: np.ndarray, x_start: np.ndarray) -> None:
+        """Raise a SimulationError (kind "motion", which the step-size controller retries
+        with a smaller Δt) if a grain's point moved farther than ``max_step_motion`` cells
+        in the step: |x_p^{n+1} − x_p^n| ≤ max_step_motion h. A body alone on the grid
+        meets no contact and may move farther (a cantilever under gravity in a few steps)."""
+        if not grains.size or len(self.model.bodies) < 2:
+            return
+        motion = np.linalg.norm(self.state.x[grains] - x_start, axis=1)
+        worst = int(np.argmax(motion))
+        h, limit = self.model.lattice.h, self.case.simulation.max_step_motion
+        if motion[worst] <= limit * h:
+            return
+        p = int(grains[worst])
+        body = self.model.bodies[int(self.model.body_id[p])]
+        raise SimulationError(
+            f"step {step}: point {p - body.points.start} of body '{body.name}' moved "
+            f"{motion[worst] / h:.3g} cells in one step (at {self.state.x[p][0]:.6g}, "
+            f"{self.state.x[p][1]:.6g}), more than [simulation] max_step_motion = {limit:g}:"
+            " contacts within a step are found only about a cell ahead; try a smaller dt.",
+            kind="motion", step=step, body=body.name, point=p - body.points.start,
+            motion=motion[worst] / (limit * h))
 
     @property
     def at_end(self) -> bool:
@@ -535,6 +588,12 @@ class Simulation:
 
 
 _STEP_IN_NAME = re.compile(r"_(\d+)\.(vtu|csv)$")
+
+
+def _halvings_for(ratio: float) -> int:
+    """How many halvings of Δt bring a motion ``ratio`` times the limit within it (0 when
+    ratio ≤ 1): ⌈log₂ ratio⌉."""
+    return max(0, math.ceil(math.log2(ratio))) if ratio > 1.0 else 0
 
 
 def _least_active_gap(contacts, default: float = math.nan) -> float:

@@ -196,3 +196,54 @@ def test_a_body_with_an_indefinite_compliance_switches_to_the_projected_tangent(
     rotation = np.array([[0.6, 0.8], [-0.8, 0.6]])
     assert _semidefinite(rotation @ np.diag([1.0, -1e-13]) @ rotation.T)
     assert not _semidefinite(rotation @ np.diag([1.0, -1e-6]) @ rotation.T)
+
+
+def _thrown_disk(max_step_motion: float, speed: float = 15.0,
+                 gravity: float = 0.0) -> Simulation:
+    """A stiff disk (c = 100 m/s) thrown at ``speed`` (15 m/s: 3 cells a step) towards a
+    kinematic slab 2 cells away, gravity along x: its contact is found at a step's start
+    only within about a cell."""
+    return Simulation(load_case({
+        "simulation": {"dt": 0.01, "steps": 6, "theta": 1.0,
+                       "max_step_motion": max_step_motion},
+        "grid": {"cell_size": 0.05, "origin": [0.0, 0.0], "size": [1.0, 1.0]},
+        "materials": {"gel": {"young": 1e7, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [{"name": "disk", "shape": "disk", "center": [0.4, 0.5], "radius": 0.2,
+                    "material": "gel", "velocity": [speed, 0.0]},
+                   {"name": "slab", "shape": "rectangle", "lower": [0.7, 0.1],
+                    "upper": [0.9, 0.9], "material": "gel", "kind": "kinematic"}],
+        "gravity": {"acceleration": [gravity, 0.0]}}))
+
+
+def test_a_step_that_would_cross_a_contact_unseen_is_shortened():
+    """The step-size controller's motion limit (session 20): a grain whose velocity would
+    carry a point farther than max_step_motion h in a step gets a Δt halved as often as that
+    takes. Measured: with the default (1 h), Δt/4, the disk's front points stop 0.04 h before
+    the slab's face and it rebounds at −3.0 m/s; without the limit (10 h) the first step
+    carries them 0.75 h into the slab, unseen by the contact found at the step's start."""
+    face, h = 0.7, 0.05
+    fronts = {}
+    for limit in (1.0, 10.0):
+        sim = _thrown_disk(limit)
+        disk = sim.model.bodies[0].points
+        front = []
+        for _ in range(sim.n_steps):
+            sim.step()
+            front.append(sim.state.x[disk, 0].max())
+        fronts[limit] = (max(front), sim.smallest_dt_factor)
+    front, smallest = fronts[1.0]
+    assert front < face and smallest == 0.25
+    front, smallest = fronts[10.0]
+    assert front > face + 0.5 * h and smallest == 1.0
+
+
+def test_a_step_that_moved_a_point_too_far_is_retried_shorter_at_once():
+    """A disk released from rest, gravity 1250 m/s² away from the slab: its first step
+    moves it g Δt² = 2.5 cells (θ = 1), which its velocity did not foretell. The step is
+    undone and redone with Δt/4 at once (⌈log₂ 2.5⌉ = 2 halvings in one retry)."""
+    sim = _thrown_disk(1.0, speed=0.0, gravity=-1250.0)
+    x0 = sim.state.x.copy()
+    sim.step()
+    assert sim.retried_steps == 1 and sim.dt_factor == 0.25
+    moved = np.linalg.norm(sim.state.x - x0, axis=1).max() / 0.05
+    assert 0.1 < moved < 1.0  # g (Δt/4)² = 2.5/16 of a cell

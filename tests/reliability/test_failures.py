@@ -46,6 +46,14 @@ def _newton() -> dict:
     return data
 
 
+def _fast_disk() -> dict:
+    # 5 cells a step towards a kinematic slab (a body alone on the grid has no motion limit)
+    data = case_dict(FREE_DISK, simulation={"dt": 1.0, "retry_halvings": 0})
+    data["bodies"].append({"name": "slab", "shape": "rectangle", "lower": [1.6, 0.5],
+                           "upper": [1.9, 1.5], "material": "rubber", "kind": "kinematic"})
+    return data
+
+
 # The failing cases were built with θ = 1/2 (the default until session 5) and without the
 # step-size controller (retry_halvings = 0): they test the diagnosis, not the cure.
 pytestmark = pytest.mark.filterwarnings("ignore::RuntimeWarning")  # the NaN case overflows
@@ -58,6 +66,8 @@ FAILURES = {
     "inverted": (_compressed("linear-elastic"),
                  ["step 0", "body 'body0'", "inverted point (J ≤ 0)", "point ",
                   "smaller dt or a finer grid"]),
+    "motion": (_fast_disk(), ["step 0", "of body 'body0'", "cells in one step",
+                              "max_step_motion", "smaller dt"]),
     "grid": (case_dict(FREE_DISK, simulation={"dt": 1.0}),
              ["step 2", "point ", "of body 'body0'", "left the grid", "enlarge [grid]"]),
     "newton": (_newton(),

@@ -89,6 +89,14 @@ class SimulationSettings(_Section):
         "inverted point, Newton or contact not converged) is undone and retried with dt "
         "halved, down to dt / 2^retry_halvings; dt doubles back after 5 converged steps "
         "(logged; 0: no retry)")
+    max_step_motion: float = Field(
+        1.0, gt=0.0, le=10.0, description="the farthest a grain's point may move in one "
+        "step, in cells h: a step that moves one farther is undone and retried with dt "
+        "halved (the contacts are found at the step's start, within about one cell, and "
+        "a point crossing more than a cell leaves the grid's view of it behind; on "
+        "quasi-static steps a snap-through or a spinning rattler moves grains several "
+        "cells); when the retry_halvings are spent the run stops. Not checked when the "
+        "case has a single body")
     tangent: Literal["auto", "projected", "exact"] = Field(
         "auto", description="Newton matrix: exact (quadratic convergence), per-point "
         "tangents made positive semi-definite (robust under compression, linear "
