@@ -247,3 +247,33 @@ def test_a_step_that_moved_a_point_too_far_is_retried_shorter_at_once():
     assert sim.retried_steps == 1 and sim.dt_factor == 0.25
     moved = np.linalg.norm(sim.state.x - x0, axis=1).max() / 0.05
     assert 0.1 < moved < 1.0  # g (Δt/4)² = 2.5/16 of a cell
+
+
+def test_the_coupling_loop_gives_up_on_a_cycle_but_not_on_slow_progress():
+    """Progress (coupling.py): a loop whose measure repeats a cycle (session 21's dense
+    frictional step: contacts switching stick/slip in turn, period 3, the loop ran to its
+    200 iterations) stalls STALL_ITERATIONS iterations after its last 10% improvement; one
+    that converges linearly, however slowly within reason, by bounded oscillations whose
+    envelope falls, or comes steadily back down from an excursion (the quasi-static
+    squeeze's step 11: 7.8 up to 66 in 30 iterations, then −15% an iteration), does not."""
+    from softgrains.contact.coupling import STALL_ITERATIONS, Progress
+
+    cycle = Progress()
+    measures = [500.0, 80.0, 30.0] + [192.0, 220.0, 680.0] * 100
+    stalled_at = next(k for k, m in enumerate(measures) if cycle.stalled(m))
+    assert stalled_at == 2 + STALL_ITERATIONS
+
+    for rate in (0.5, 0.9, 0.99):
+        linear = Progress()
+        assert not any(linear.stalled(1e3 * rate ** k) for k in range(200))
+    zigzag = Progress()  # a period-2 oscillation over a falling envelope
+    assert not any(zigzag.stalled(1e3 * 0.97 ** k * (4.0 if k % 2 else 1.0))
+                   for k in range(200))
+    excursion = Progress()
+    measures = [7.8 * 1.075 ** k for k in range(30)] + [66.0 * 0.85 ** k for k in range(30)]
+    assert not any(excursion.stalled(m) for m in measures)
+    restarted = Progress()
+    for m in [1.0] + [5.0] * (STALL_ITERATIONS - 1):
+        assert not restarted.stalled(m)
+    restarted.restart()  # a new tangent: the best is forgotten
+    assert not restarted.stalled(5.0)

@@ -341,7 +341,9 @@ class ContactSettings(_Section):
                              "relative to the largest impulse")
     max_iterations: int = Field(200, ge=1, le=100000,
                                 description="coupling iterations (a Newton update of the bodies "
-                                "and a complete contact solve each)")
+                                "and a complete contact solve each); a step whose loop makes no "
+                                "progress in 40 iterations in a row stops earlier, unconverged "
+                                "(a cycle: retried with a smaller dt)")
     solver: Literal["newton", "nsgs"] = Field(
         "newton", description="contact problem solver: semismooth Newton (Alart-Curnier) or "
         "nonlinear Gauss-Seidel")

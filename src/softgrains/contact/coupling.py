@@ -24,7 +24,8 @@ step of the bodies with a solve of the contact problem.
     −GAP_OVERLAP h), the constraint is moved by the error e = g⁺ − g_lin, re-evaluated
     after each solve (a fixed point on the nonlinear gap), and the loop goes on (at most
     GAP_UPDATES times a step). Without it the linearisation's errors stay as overlaps and
-    add up (session 15)
+    add up (session 15); or until the loop stalls (no progress in STALL_ITERATIONS
+    iterations, :class:`Progress`): the step is reported unconverged and retried shorter
 
 Kinematic bodies take no impulse response (W = 0): their nodal velocity is their prescribed
 velocity. With ``tangent = "auto"`` a body whose compliance W_s is indefinite takes the
@@ -34,6 +35,7 @@ step whose contact solves keep failing or that needs many iterations.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -75,6 +77,14 @@ INDEFINITE = 1e-9  # a body's W with an eigenvalue below −this × its largest 
 # a solve on an indefinite W that a tangent switch can mend: Newton only, this many
 # iterations (those that converged in a dense compaction took 9-11)
 INDEFINITE_NEWTON_ITERATIONS = 20
+# the loop gives up on a step (unconverged: the step-size controller retries it shorter)
+# when its progress measure has not fallen below STALL_DECREASE × its best in
+# STALL_ITERATIONS iterations and is not falling in each of its last STALL_DESCENT
+# iterations (session 21: cycles of period 2-3 that ran to the limit; the squeeze's
+# excursions, up 8× and back down in 40-50 iterations, are no cycle)
+STALL_ITERATIONS = 40
+STALL_DECREASE = 0.9
+STALL_DESCENT = 5
 # the end-of-step gap check (end_gaps.py): a point contact whose true end gap would pass
 # below its floor, min(its start gap, −GAP_OVERLAP h), by GAP_ERROR h or more has its
 # constraint corrected by the difference and the step solved again (a fixed point on the
@@ -120,6 +130,39 @@ class ContactDiagnostics:
     wall_work: float = 0.0  # work of the kinematic walls' contact forces over the step
     dissipation: float = 0.0  # energy the contacts took out of the bodies over the step
     gap_updates: int = 0  # constraints corrected by the true end-of-step gaps (end_gaps.py)
+    stalled: bool = False  # stopped early: no progress in STALL_ITERATIONS iterations
+
+
+@dataclass
+class Progress:
+    """Stall detection for the coupling loop. Its measure is
+    m = max(r_c / tol_c, max_b ‖R_b‖ / threshold_b), the largest of the contact residual
+    and the bodies' Newton residuals over their stopping thresholds (converged: m ≤ 1).
+    The loop has stalled when m has not fallen below STALL_DECREASE × its best in
+    STALL_ITERATIONS iterations and has not fallen at each of its last STALL_DESCENT
+    iterations either: a cycle (contacts switching stick/slip/open in turn, a soft mode
+    over- and undershot by a body's projected tangent) that more iterations do not cure,
+    where a shorter step does. A loop coming steadily back down from an excursion goes on."""
+
+    best: float = math.inf
+    since: int = 0
+    recent: list[float] = field(default_factory=list)
+
+    def stalled(self, measure: float) -> bool:
+        """Record this iteration's measure; True when the loop has stalled."""
+        self.recent = (self.recent + [measure])[-STALL_DESCENT:]
+        if measure < STALL_DECREASE * self.best:
+            self.best, self.since = measure, 0
+            return False
+        self.since += 1
+        descending = len(self.recent) == STALL_DESCENT and all(
+            later < earlier for earlier, later in zip(self.recent[:-1], self.recent[1:],
+                                                      strict=True))
+        return self.since >= STALL_ITERATIONS and not descending
+
+    def restart(self) -> None:
+        """Forget the best (the iteration changed: a new tangent, corrected gaps)."""
+        self.best, self.since, self.recent = math.inf, 0, []
 
 
 @dataclass
@@ -259,6 +302,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     failed_solves = 0
     actual = None  # the relative velocities at the bodies' iterate (after a first update)
     in_contact = set(slots.bodies)
+    progress, finished = Progress(), False
     for k in range(1, settings.max_iterations + 1):
         # the Newton direction of every body not converged, with the current impulses
         du = {i: b.newton_direction(direct=delassus and i in in_contact)
@@ -287,6 +331,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # would switch every body at the next one)
             for i in _switch_indefinite(steps, slots):
                 done[i] = False
+            progress.restart()
             continue
         failed_solves += failed
         if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k == AUTO_TANGENT_ITERATIONS:
@@ -298,6 +343,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 for i in switched:
                     done[i] = False
                 slots.W = [None] * len(slots.W)
+                progress.restart()
                 continue
         diag.sweeps += result.iterations
         # the combined step: Newton direction plus the response to the impulse changes,
@@ -327,6 +373,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         if diag.residual <= settings.tolerance and all(done.values()):
             if (points is None or not settings.end_gap_check
                     or diag.gap_updates >= GAP_UPDATES):
+                finished = True
                 break
             # the constraint is on the true end-of-step gap: where the linearised one
             # missed an overlap (a true end gap below its floor: not wherever the error
@@ -341,11 +388,17 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             offset = _end_gap_offsets(true, at, linear, slack, corrected)
             if not below.any() and np.abs(offset - end_gap_offset).max(
                     initial=0.0) < GAP_ERROR * lattice.h:
+                finished = True
                 break
             end_gap_offset = offset
             bias = (held + end_gap_offset) / (theta * dt)
             diag.gap_updates += 1
-    else:
+            progress.restart()
+        elif progress.stalled(max([diag.residual / settings.tolerance] + [
+                b.residual_ratio(p_scale * b.impulse_weight) for b in steps.values()])):
+            diag.stalled = True
+            break
+    if not finished:
         diag.converged = False
         phi = np.linalg.norm(natural_map_residual(problem, P, actual), axis=1)
         c = int(np.argmax(phi))
@@ -356,8 +409,11 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         where = ", ".join(f"{x:.6g}" for x in at)
         bodies_left = [steps[i].stepper.name for i, ok in done.items() if not ok]
         diag.message = (
-            f"step {step}: the contact loop did not converge in {settings.max_iterations} "
-            f"iterations (complementarity residual {diag.residual:.2e} of the largest "
+            f"step {step}: the contact loop "
+            + (f"stalled after {diag.iterations} iterations (no progress in the last "
+               f"{STALL_ITERATIONS})" if diag.stalled else
+               f"did not converge in {settings.max_iterations} iterations")
+            + f" (complementarity residual {diag.residual:.2e} of the largest "
             f"impulse, tolerance {settings.tolerance:g}; {settings.relation} relation, "
             f"{settings.solver} contact solver; largest error between bodies '{name_a}' and "
             f"'{name_b}' at ({where})"

@@ -424,7 +424,7 @@ class BodyStep:
                 "constants, velocities) or try a smaller dt.", kind="nan", step=step,
                 body=name, point=p, residuals=res.residuals + [self.rnorm])
         res.residuals.append(self.rnorm)
-        if self.rnorm <= max(st.tolerance * self.r0, self.floor, floor):
+        if self.residual_ratio(floor) <= 1.0:
             return True
         if limit and res.iterations >= st.max_iterations:
             node, p = self._node_and_point(int(np.argmax(np.abs(self.r).max(axis=1))))
@@ -435,6 +435,11 @@ class BodyStep:
                 "try a smaller dt, more newton_max_iterations or a looser newton_tolerance.",
                 kind="newton", step=step, body=name, point=p, residuals=res.residuals)
         return False
+
+    def residual_ratio(self, floor: float = 0.0) -> float:
+        """‖R‖ over the stopping threshold max(tol ‖R_0‖, the round-off floor, ``floor``):
+        ≤ 1 when converged."""
+        return self.rnorm / max(self.settings.tolerance * self.r0, self.floor, floor, 1e-300)
 
     def _node_and_point(self, row: int) -> tuple[np.ndarray, int]:
         """Position of active ``row``'s node and the body's point nearest to it."""
