@@ -410,8 +410,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         bodies_left = [steps[i].stepper.name for i, ok in done.items() if not ok]
         diag.message = (
             f"step {step}: the contact loop "
-            + (f"stalled after {diag.iterations} iterations (no progress in the last "
-               f"{STALL_ITERATIONS})" if diag.stalled else
+            + (f"stalled after {diag.iterations} iterations, no progress in the last "
+               f"{STALL_ITERATIONS}" if diag.stalled else
                f"did not converge in {settings.max_iterations} iterations")
             + f" (complementarity residual {diag.residual:.2e} of the largest "
             f"impulse, tolerance {settings.tolerance:g}; {settings.relation} relation, "
@@ -419,9 +419,11 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             f"'{name_b}' at ({where})"
             + (f"; bodies whose Newton residual is above its tolerance: "
                f"{', '.join(bodies_left[:5])}" if bodies_left else "")
-            + "); try a smaller dt, more contact max_iterations"
-            + (", a looser contact tolerance or local_relation = \"delassus\"."
-               if settings.relation == "lumped" else " or a looser contact tolerance."))
+            + ("); a cycle that more iterations do not cure: try a smaller dt (or more "
+               "[simulation] retry_halvings)." if diag.stalled else
+               "); try a smaller dt, more contact max_iterations"
+               + (", a looser contact tolerance or local_relation = \"delassus\"."
+                  if settings.relation == "lumped" else " or a looser contact tolerance.")))
         diag.problem = problem
         if settings.on_failure == "stop":
             raise SimulationError(diag.message, kind="contact", step=step,
