@@ -184,7 +184,7 @@ class Simulation:
         saved = checkpointing.snapshot(self) if halvings else None
         while True:
             try:
-                dg = self._advance(self.dt_factor)
+                dg = self._advance(self._factor_to_end(self.dt_factor))
             except SimulationError as error:
                 kind = error.diagnosis.get("kind")
                 cuts = _halvings_for(error.diagnosis["motion"]) if kind == "motion" else 1
@@ -210,6 +210,19 @@ class Simulation:
                     f"step {self.state.step}: {GROW_AFTER_STEPS} steps converged, dt x "
                     f"{self.dt_factor:g} from here (step-size controller)")
             return dg
+
+    def _factor_to_end(self, factor: float) -> float:
+        """``factor`` limited so that the step does not pass ``simulation.end_time``: after
+        retries at a shortened Δt the steps no longer land on it, and a run (or a load
+        path) must end where the case says: t + factor Δt ≤ t_end."""
+        sim = self.case.simulation
+        if sim.steps is not None:
+            return factor
+        dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        remaining = sim.end_time - self.state.time
+        if 0.0 < remaining < factor * dt * (1.0 - 1e-9):
+            return remaining / dt
+        return factor
 
     def _shorten_for_velocities(self, halvings: int) -> None:
         """Halve Δt before the step, within ``retry_halvings``, while the grains' current

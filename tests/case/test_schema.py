@@ -20,7 +20,7 @@ def test_minimal_case_gets_the_documented_defaults() -> None:
     assert (sim.seed, sim.threads, sim.linear_solver) == (0, 0, "auto")
     assert (sim.newton_tolerance, sim.newton_max_iterations) == (1e-8, 25)
     assert case.grid.origin == [0.0, 0.0]
-    assert (case.grid.shape_function, case.grid.points_per_cell) == ("linear", 2)
+    assert (case.grid.shape_function, case.grid.points_per_cell) == ("bspline2", 2)
     assert case.materials["rubber"].law == "neo-hookean"
     body = case.bodies[0]
     assert (body.name, body.kind, body.velocity) == ("body0", "deformable", [0.0, 0.0])

@@ -78,22 +78,26 @@ def test_precompaction_reaches_sigma0_then_compaction_to_the_stop(run):
 
 
 def test_wall_stress_matches_the_volume_averaged_stress(run):
-    """ALGORITHM.md §9 cross-check once quasi-static, VALIDATION.md C9's 5%: on the steps
-    whose kinetic energy is ≤ 0.002 × the strain energy (ALGORITHM.md §8 calls 1e-3
-    equilibrium). Measured (2026-12-01, wall at 0.5 m/s): 18 such steps, the averaged σ_yy
-    within 3.2% of the wall's (1.3% on average); with kinetic ≤ 0.01 × strain (83 steps)
-    one burst step is 7.5% off (1.6% on average). (At 1 m/s, the earlier set-up, no step
-    reached 2e-3.)"""
+    """ALGORITHM.md §9 cross-check once quasi-static, VALIDATION.md C9's 5%. The identity
+    Σ_p V_p σ_p = Σ x ⊗ f holds in static equilibrium: steps whose kinetic energy is
+    ≤ 0.002 × the strain energy and whose two walls carry the same load within 2% (a
+    sample whose walls differ is accelerating). Measured (2026-12-04, B-splines, walls at
+    the points, wall at 0.5 m/s): 15 steps with little kinetic energy; on the first
+    (5.1 σ0, just after the pre-compaction) the bottom wall carries 12.5% less than the top
+    and σ_avg is 7.3% below it; on the 13 balanced ones σ_avg is within 0.9% of the wall's
+    (0.2% on average). (Hats and nodal walls, 2026-12-01: within 3.2%, 1.3% on average;
+    B-splines with nodal walls, session 10: 6.8%, the force rows 0.35 h inside the walls.)"""
     _, _, series = run
     comp = series["phase"] == "compaction"
     calm = comp & (series["kinetic_energy"] <= 0.002 * series["strain_energy"])
-    assert calm.sum() >= 10
-    deviation = np.abs(series["stress_yy_avg"][calm] / series["stress_yy"][calm] - 1.0)
+    # frictionless side walls: the bottom wall carries what the top wall does
+    imbalance = np.abs(series["stress_yy_bottom"] / series["stress_yy"] - 1.0)
+    assert imbalance[calm].mean() < 0.03
+    balanced = calm & (imbalance <= 0.02)
+    assert balanced.sum() >= 10
+    deviation = np.abs(series["stress_yy_avg"][balanced] / series["stress_yy"][balanced] - 1.0)
     assert deviation.mean() < 0.03
     assert deviation.max() < 0.05
-    # frictionless side walls: the bottom wall carries what the top wall does
-    bottom = np.abs(series["stress_yy_bottom"][calm] / series["stress_yy"][calm] - 1.0)
-    assert bottom.mean() < 0.03
 
 
 def test_packing_fraction_measures_agree_and_overlap_stays_small(run):

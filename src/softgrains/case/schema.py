@@ -149,7 +149,10 @@ class GridSettings(_Section):
     origin: list[float] = Field(default_factory=_zero_vector, description="lower corner [m]")
     size: list[PositiveFloat] | None = Field(
         None, description="extent of the domain per axis [m] (default with [sample]: the box)")
-    shape_function: Literal["linear", "bspline2"] = Field("linear", description="shape functions")
+    shape_function: Literal["linear", "bspline2"] = Field(
+        "bspline2", description="shape functions: quadratic B-splines (smooth gradients; "
+        "linear hats let loaded bodies drift a fraction of a cell a step as points cross cell "
+        "edges: docs/dev-notes.md) or linear hats")
     points_per_cell: int = Field(2, ge=1, le=6, description="material points per cell per axis")
 
     @property
@@ -327,10 +330,11 @@ class ContactSettings(_Section):
         "points against the other's kernel-smoothed surface (two passes), or at the nodes "
         "they share (the contact of sessions 1-10, which lets loaded grains into each other)")
     wall_sites: Literal["nodes", "surface", "points"] = Field(
-        "nodes", description="where a grain's contacts with a kinematic rectangle or disk "
-        "act: at the nodes they share (exact face normals); at each of the grain's points "
-        "within reach against the wall's exact face, the force at the edge of the point's "
-        "cell (\"points\"); or the same points grouped in patches of about h "
+        "points", description="where a grain's contacts with a kinematic rectangle or disk "
+        "act: at each of the grain's points within reach against the wall's exact face, the "
+        "force at the edge of the point's cell (\"points\"); at the nodes they share (exact "
+        "face normals, but loaded grains creep into the wall); or the points grouped in "
+        "patches of about h "
         "(\"surface\", cheaper, but the patch's mean constrains the patch, not each "
         "point); docs/dev-notes.md")
     local_relation: Literal["delassus", "lumped"] = Field(
