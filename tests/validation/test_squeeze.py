@@ -10,6 +10,7 @@ The case is the benchmark's (benchmarks/squeeze_convergence.py): R = 0.5 m, E = 
 
     D/h   Δt c/h = 3000               Δt c/h = 40
     20    2.4%, −0.008 h (65 steps)   2.0%, −0.0005 h (30 steps)
+    40    1.3%, −0.003 h (74 steps)   1.2%, −0.0003 h (60 steps)
 
 At Δt c/h 3000 the coupling loop stalls on some steps (the disk's residual cycling while
 points enter and leave the plates' reach) and the step-size controller redoes them at
