@@ -211,6 +211,11 @@ class Simulation:
                     f"{self.dt_factor:g} from here (step-size controller)")
             return dg
 
+    def _nominal_dt(self) -> float:
+        """The step's Δt before the controller's factor: the protocol's (its phase may set
+        its own) or the case's."""
+        return self.protocol.time_step() if self.protocol is not None else self.dt
+
     def _factor_to_end(self, factor: float) -> float:
         """``factor`` limited so that the step does not pass ``simulation.end_time``: after
         retries at a shortened Δt the steps no longer land on it, and a run (or a load
@@ -218,7 +223,7 @@ class Simulation:
         sim = self.case.simulation
         if sim.steps is not None:
             return factor
-        dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        dt = self._nominal_dt()
         remaining = sim.end_time - self.state.time
         if 0.0 < remaining < factor * dt * (1.0 - 1e-9):
             return remaining / dt
@@ -232,7 +237,7 @@ class Simulation:
         grains = self.model.deformable_points
         if not halvings or not grains.size or len(self.model.bodies) < 2:
             return
-        dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        dt = self._nominal_dt()
         speed = float(np.sqrt(np.einsum("ij,ij->i", self.state.v[grains],
                                         self.state.v[grains]).max()))
         reach = self.case.simulation.max_step_motion * self.model.lattice.h
@@ -250,7 +255,7 @@ class Simulation:
         """The step itself, with the nominal Δt times ``factor``."""
         if self.protocol is not None:
             self.protocol.before_step(self.state)
-        dt = self.protocol.time_step() if self.protocol is not None else self.dt
+        dt = self._nominal_dt()
         dt = self.last_dt = dt * factor
         step = self.state.step
         grains = self.model.deformable_points
