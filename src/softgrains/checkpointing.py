@@ -64,6 +64,7 @@ def snapshot(sim) -> tuple[dict[str, np.ndarray], dict[str, object]]:
         "unconverged_contact_steps": sim.unconverged_contact_steps,
         "retried_steps": sim.retried_steps,
         "wall_work": sim.wall_work, "contact_dissipation": sim.contact_dissipation,
+        "gap_correction_work": sim.gap_correction_work,
         "integrator_dissipation": sim.integrator_dissipation,
         "transfer_dissipation": sim.transfer_dissipation,
         "largest_penetration": sim.largest_penetration,
@@ -132,6 +133,7 @@ def restore(sim, arrays: dict[str, np.ndarray], meta: dict[str, object]) -> None
     sim.retried_steps = int(meta.get("retried_steps", 0))
     sim.wall_work = float(meta.get("wall_work", 0.0))
     sim.contact_dissipation = float(meta.get("contact_dissipation", 0.0))
+    sim.gap_correction_work = float(meta.get("gap_correction_work", 0.0))
     sim.integrator_dissipation = float(meta.get("integrator_dissipation", 0.0))
     sim.transfer_dissipation = float(meta.get("transfer_dissipation", 0.0))
     sim.largest_penetration = float(meta.get("largest_penetration", 0.0))

@@ -57,7 +57,7 @@ SERIES_COLUMNS = [
     "momentum_x", "momentum_y", "newton_residual", "linear_solver", "contact_sweeps",
     "contact_nodes", "contact_sticking", "contact_sliding", "contact_converged", "wall_time",
     "wall_work", "contact_dissipation", "integrator_dissipation", "transfer_dissipation",
-    "least_contact_gap",
+    "least_contact_gap", "gap_correction_work",
 ]
 
 
@@ -88,6 +88,7 @@ class Simulation:
         #   ΔE = wall_work − contact_dissipation − integrator_dissipation − transfer_dissipation
         self.wall_work = 0.0
         self.contact_dissipation = 0.0
+        self.gap_correction_work = 0.0  # of it, what contact.end_gap_check's corrections put in
         self.integrator_dissipation = 0.0
         self.transfer_dissipation = 0.0
         self.largest_penetration = 0.0  # −(least gap at an active contact) over the run, m
@@ -137,6 +138,7 @@ class Simulation:
             "integrator_dissipation": self.integrator_dissipation,
             "transfer_dissipation": self.transfer_dissipation,
             "least_contact_gap": _least_active_gap(dg.contacts),
+            "gap_correction_work": self.gap_correction_work,
             **self._protocol_observables(),
         }
 
@@ -282,6 +284,7 @@ class Simulation:
         self.wall_work += dg.contact.wall_work + sum(r.prescribed_work
                                                      for r in dg.bodies.values())
         self.contact_dissipation += dg.contact.dissipation
+        self.gap_correction_work += dg.contact.correction_work
         self.integrator_dissipation += sum(r.integrator_dissipation for r in dg.bodies.values())
         self.transfer_dissipation += sum(r.transfer_dissipation for r in dg.bodies.values())
         self.largest_penetration = max(self.largest_penetration,

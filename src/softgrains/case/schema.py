@@ -310,12 +310,12 @@ class ContactSettings(_Section):
         "estimate says the bodies overlap, so that the estimate's scatter cannot ratchet "
         "loaded bodies into each other (opt-in while it is measured: docs/dev-notes.md)")
     end_gap_check: bool = Field(
-        False, description="after each converged step, the point contacts' gaps evaluated "
+        True, description="after each converged step, the point contacts' gaps evaluated "
         "at the end of the step (points and surfaces moved): where the linearised gap "
         "missed an overlap below min(start gap, -0.025 h), the constraint is corrected and "
-        "the step solved again (at most 3 times). Holds the linearisation's errors from "
-        "adding up; a correction does work in the energy bookkeeping (opt-in while its "
-        "cost is measured: docs/dev-notes.md, sessions 15-16)")
+        "the step solved again (at most 3 times; a step whose gaps have not settled then "
+        "is retried shorter). Keeps the linearisation's errors from adding up; the "
+        "energy the corrections put in is series.csv's gap_correction_work")
     overlap_removal: float = Field(
         0.0, ge=0.0, le=1.0, description="fraction of an estimated overlap between two "
         "bodies removed per step (0: overlaps are only kept from growing)")

@@ -18,14 +18,16 @@ step of the bodies with a solve of the contact problem.
             its residual at the start): loose while the bodies are far from converged
         each body: the combined step du + X ΔQ = −A⁻¹ R(u; P_new) through the line search
     until the contacts' complementarity (natural-map) residual ≤ tol and every body's
-    residual ≤ tol × the largest impulse; then (``end_gap_check``, opt-in) the point
+    residual ≤ tol × the largest impulse; then (``end_gap_check``, the default) the point
     contacts' true end-of-step gaps g⁺ (end_gaps.py: points and surfaces moved by the
     step's u): where g⁺ is an overlap below its floor (its start gap, and at least
     −GAP_OVERLAP h), the constraint is moved by the error e = g⁺ − g_lin, re-evaluated
     after each solve (a fixed point on the nonlinear gap), and the loop goes on (at most
-    GAP_UPDATES times a step). Without it the linearisation's errors stay as overlaps and
-    add up (session 15); or until the loop stalls (no progress in STALL_ITERATIONS
-    iterations, :class:`Progress`): the step is reported unconverged and retried shorter
+    GAP_UPDATES times a step; a gap still below its floor then makes the step
+    unconverged: it moved too far for its start geometry). Without it the linearisation's
+    errors stay as overlaps and add up (session 15); or until the loop stalls (no progress
+    in STALL_ITERATIONS iterations, :class:`Progress`): the step is reported unconverged
+    and retried shorter
 
 Kinematic bodies take no impulse response (W = 0): their nodal velocity is their prescribed
 velocity. With ``tangent = "auto"`` a body whose compliance W_s is indefinite takes the
@@ -108,11 +110,11 @@ class CouplingSettings:
     overlap_removal: float = 0.0  # fraction of an estimated overlap removed per step
     overlap_tolerance: float = 0.0  # overlap (in cells h) left alone by the removal
     keep_closed: bool = False  # a contact loaded at the previous step starts closed (g ≤ 0)
-    end_gap_check: bool = False  # correct the point contacts by their true end-of-step gaps
+    end_gap_check: bool = True  # correct the point contacts by their true end-of-step gaps
     solver: str = "newton"  # contact problem solver: newton | nsgs (solvers.py)
     solver_iterations: int = 50  # per contact solve: Newton iterations or NSGS sweeps
     grain_sites: str = "surface"  # grain–grain contacts at outer points, or at shared nodes
-    wall_sites: str = "nodes"  # grain–wall contacts at shared nodes, patches or points
+    wall_sites: str = "points"  # grain–wall contacts at shared nodes, patches or points
 
 
 @dataclass
@@ -130,6 +132,10 @@ class ContactDiagnostics:
     wall_work: float = 0.0  # work of the kinematic walls' contact forces over the step
     dissipation: float = 0.0  # energy the contacts took out of the bodies over the step
     gap_updates: int = 0  # constraints corrected by the true end-of-step gaps (end_gaps.py)
+    # work the end-gap corrections' offsets o ≤ 0 let the contact forces do, Σ P_n(−o)/Δt
+    # ≥ 0: energy put in, a part of −dissipation (the force acts along the start-of-step
+    # normal while the true gap is held)
+    correction_work: float = 0.0
     stalled: bool = False  # stopped early: no progress in STALL_ITERATIONS iterations
 
 
@@ -303,6 +309,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     actual = None  # the relative velocities at the bodies' iterate (after a first update)
     in_contact = set(slots.bodies)
     progress, finished = Progress(), False
+    short_gap = None  # (contact, true end gap, floor) when the end-gap check did not settle
     for k in range(1, settings.max_iterations + 1):
         # the Newton direction of every body not converged, with the current impulses
         du = {i: b.newton_direction(direct=delassus and i in in_contact)
@@ -371,8 +378,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         done = {i: b.converged(limit=False, floor=p_scale * b.impulse_weight)
                 for i, b in steps.items()}
         if diag.residual <= settings.tolerance and all(done.values()):
-            if (points is None or not settings.end_gap_check
-                    or diag.gap_updates >= GAP_UPDATES):
+            if points is None or not settings.end_gap_check:
                 finished = True
                 break
             # the constraint is on the true end-of-step gap: where the linearised one
@@ -382,14 +388,21 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             lone = point_contact >= 0
             at = point_contact[lone]
             true = end_gaps(select(points, lone), steps, walls, spacing, dt)
-            below = ~corrected[at] & (true < floor_gap[at] - GAP_ERROR * lattice.h)
-            corrected[at] |= below
+            short = true < floor_gap[at] - GAP_ERROR * lattice.h
             linear = predicted + theta * dt * np.einsum("ci,ci->c", actual, contacts.normal)
-            offset = _end_gap_offsets(true, at, linear, slack, corrected)
-            if not below.any() and np.abs(offset - end_gap_offset).max(
-                    initial=0.0) < GAP_ERROR * lattice.h:
+            offset = _end_gap_offsets(true, at, linear, slack, corrected | _on(n, at, short))
+            settled = np.abs(offset - end_gap_offset).max(initial=0.0) < GAP_ERROR * lattice.h
+            if not short.any() and (settled or diag.gap_updates >= GAP_UPDATES):
                 finished = True
                 break
+            if diag.gap_updates >= GAP_UPDATES:
+                # the fixed point has not settled: the step's motion is too large for
+                # the start-of-step geometry (seen in the pre-compaction's impact at
+                # 0.2 h a step, settled at half the step): unconverged, retried shorter
+                worst = int(np.nanargmin(true - floor_gap[at]))
+                short_gap = (int(at[worst]), float(true[worst]), float(floor_gap[at[worst]]))
+                break
+            corrected |= _on(n, at, short)
             end_gap_offset = offset
             bias = (held + end_gap_offset) / (theta * dt)
             diag.gap_updates += 1
@@ -406,9 +419,20 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         name_a, name_b = (names[a], names[b]) if names is not None else (a, b)
         at = (node_position(lattice, contacts.node[c:c + 1])[0] if contacts.position is None
               else contacts.position[c])
+        if short_gap is not None:  # where the end-of-step gap did not settle
+            c = short_gap[0]
+            a, b = int(contacts.alpha[c]), int(contacts.beta[c])
+            name_a, name_b = (names[a], names[b]) if names is not None else (a, b)
+            at = contacts.position[c]
         where = ", ".join(f"{x:.6g}" for x in at)
         bodies_left = [steps[i].stepper.name for i, ok in done.items() if not ok]
         diag.message = (
+            f"step {step}: the end-of-step gaps did not settle in {GAP_UPDATES} re-solves "
+            f"(contact.end_gap_check): the true end gap between bodies '{name_a}' and "
+            f"'{name_b}' at ({where}) is {short_gap[1] / lattice.h:.3g} h, below its floor "
+            f"{short_gap[2] / lattice.h:.3g} h; the step moves the bodies too far for the "
+            "contact geometry at its start: try a smaller dt (or more [simulation] "
+            "retry_halvings)." if short_gap is not None else
             f"step {step}: the contact loop "
             + (f"stalled after {diag.iterations} iterations, no progress in the last "
                f"{STALL_ITERATIONS}" if diag.stalled else
@@ -429,6 +453,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             raise SimulationError(diag.message, kind="contact", step=step,
                                   body=name_a, other=name_b, contact_problem=problem)
     diag.wall_work, diag.dissipation = _contact_work(steps, slots, P, wall_va, wall_vb, dt)
+    diag.correction_work = -float(np.einsum("ci,ci->c", P, contacts.normal)
+                                  @ end_gap_offset) / dt
     diag.active = int(np.sum(np.any(P != 0.0, axis=1)))
     diag.sticking = int(np.sum(status == STICK))
     diag.sliding = int(np.sum(status == SLIP))
@@ -470,6 +496,13 @@ def _semidefinite(W: np.ndarray) -> bool:
     except np.linalg.LinAlgError:
         return False
     return True
+
+
+def _on(n: int, at: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """A mask over the n contacts, true at the contacts ``at[which]``."""
+    mask = np.zeros(n, bool)
+    mask[at[which]] = True
+    return mask
 
 
 def _end_gap_offsets(true: np.ndarray, at: np.ndarray, linear: np.ndarray,
