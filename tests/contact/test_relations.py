@@ -348,7 +348,9 @@ def test_a_step_whose_end_gaps_do_not_settle_is_retried_shorter(monkeypatch):
     names end_gap_check and the contact, or the step-size controller retries it shorter
     (session 23: the pre-compaction's impact at 0.2 h a step, 3 re-solves not enough, at
     Δt/2 none needed). Shown on the fast sliding disk with no re-solve allowed
-    (GAP_UPDATES = 0), so that every step needing a correction fails at its Δt."""
+    (GAP_UPDATES = 0), so that every step needing a correction fails at its Δt: measured
+    2 steps retried, down to Δt/4, least gap −0.034 h (with the 3 re-solves: none
+    retried, −0.025 h)."""
     from softgrains.contact import coupling
     monkeypatch.setattr(coupling, "GAP_UPDATES", 0)
     sim = _disk_sliding_on_block(grain_sites="surface", end_gap_check=True, retry_halvings=0)
