@@ -74,3 +74,16 @@ def test_bad_header_and_values_rejected(tmp_path: Path) -> None:
         CsvTable(tmp_path / "t.csv", ["a", "a"])
     with CsvTable(tmp_path / "u.csv", ["a"]) as table, pytest.raises(TypeError):
         table.append([object()])
+
+
+def test_resuming_a_table_of_another_version_names_the_columns(tmp_path: Path) -> None:
+    """A series.csv written before a column was added (session 23: gap_correction_work)
+    cannot be appended to: the error names what differs and what to do."""
+    from softgrains.io import truncate_after_step
+
+    path = tmp_path / "series.csv"
+    with CsvTable(path, ["step", "wall_work"]) as table:
+        table.append({"step": 1, "wall_work": 0.5})
+    with pytest.raises(ValueError, match=r"missing: gap_correction_work.*without --resume"):
+        truncate_after_step(path, ["step", "wall_work", "gap_correction_work"], 1)
+    assert truncate_after_step(path, ["step", "wall_work"], 1) == 1  # its one row kept

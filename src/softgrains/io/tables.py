@@ -107,7 +107,14 @@ def truncate_after_step(path: str | Path, columns: Sequence[str], step: int) -> 
     lines = text.splitlines(keepends=True)
     header = next(csv.reader(lines[:1]), [])
     if header != list(columns):
-        raise ValueError(f"{path}: its columns are not those of this case")
+        missing = [c for c in columns if c not in header]
+        extra = [c for c in header if c not in columns]
+        raise ValueError(
+            f"{path}: its columns are not those of this case"
+            + (f" (missing: {', '.join(missing)})" if missing else "")
+            + (f" (not written any more: {', '.join(extra)})" if extra else "")
+            + ": it was written by another case or by another version of softgrains; run "
+            "without --resume into another --out folder")
     where = header.index("step")
     kept = [lines[0]]
     for line in lines[1:]:
