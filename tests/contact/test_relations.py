@@ -273,6 +273,17 @@ def _disk_sliding_on_block(keep_closed=False, grain_sites="nodes", shape_functio
     }))
 
 
+def _least_loaded_gap(sim, steps: int) -> float:
+    """Run ``steps`` steps; the least start-of-step gap (in h, ≤ 0) at the contacts that
+    carried an impulse."""
+    least = 0.0
+    for _ in range(steps):
+        sim.step()
+        loaded = np.any(sim.state.contacts.impulse != 0.0, axis=1)
+        least = min(least, float(sim.state.contacts.gap[loaded].min(initial=0.0)))
+    return least / sim.model.lattice.h
+
+
 @pytest.mark.parametrize("shape_function", ["linear", "bspline2"])
 def test_a_frictionless_disk_slides_on_a_grain_without_sinking_or_gaining_energy(
         shape_function):
@@ -325,12 +336,7 @@ def test_a_fast_sliding_disk_is_held_by_its_true_end_of_step_gaps():
     disk = sim.model.bodies[0].points
     sim.state.v[disk, 0] = 2.0
     start = sim.series_row()
-    h = sim.model.lattice.h
-    least = 0.0
-    for _ in range(20):
-        sim.step()
-        loaded = np.any(sim.state.contacts.impulse != 0.0, axis=1)
-        least = min(least, float(sim.state.contacts.gap[loaded].min(initial=0.0)) / h)
+    least = _least_loaded_gap(sim, 20)
     assert sim.state.v[disk, 0].mean() > 1.5  # it slid
     assert least > -0.05
     end = sim.series_row()
@@ -363,11 +369,7 @@ def test_a_step_whose_end_gaps_do_not_settle_is_retried_shorter(monkeypatch):
 
     sim = _disk_sliding_on_block(grain_sites="surface", end_gap_check=True)
     sim.state.v[sim.model.bodies[0].points, 0] = 2.0
-    h, least = sim.model.lattice.h, 0.0
-    for _ in range(20):
-        sim.step()
-        loaded = np.any(sim.state.contacts.impulse != 0.0, axis=1)
-        least = min(least, float(sim.state.contacts.gap[loaded].min(initial=0.0)) / h)
+    least = _least_loaded_gap(sim, 20)
     assert sim.retried_steps > 0 and sim.smallest_dt_factor < 1.0
     assert sim.state.v[sim.model.bodies[0].points, 0].mean() > 1.5  # it slid
     assert least > -0.05

@@ -389,8 +389,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             at = point_contact[lone]
             true = end_gaps(select(points, lone), steps, walls, spacing, dt)
             short = true < floor_gap[at] - GAP_ERROR * lattice.h
+            newly = _on(n, at, short)
             linear = predicted + theta * dt * np.einsum("ci,ci->c", actual, contacts.normal)
-            offset = _end_gap_offsets(true, at, linear, slack, corrected | _on(n, at, short))
+            offset = _end_gap_offsets(true, at, linear, slack, corrected | newly)
             settled = np.abs(offset - end_gap_offset).max(initial=0.0) < GAP_ERROR * lattice.h
             if not short.any() and (settled or diag.gap_updates >= GAP_UPDATES):
                 finished = True
@@ -402,7 +403,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 worst = int(np.nanargmin(true - floor_gap[at]))
                 short_gap = (int(at[worst]), float(true[worst]), float(floor_gap[at[worst]]))
                 break
-            corrected |= _on(n, at, short)
+            corrected |= newly
             end_gap_offset = offset
             bias = (held + end_gap_offset) / (theta * dt)
             diag.gap_updates += 1
@@ -413,41 +414,42 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             break
     if not finished:
         diag.converged = False
-        phi = np.linalg.norm(natural_map_residual(problem, P, actual), axis=1)
-        c = int(np.argmax(phi))
+        if short_gap is not None:  # where the end-of-step gap did not settle
+            c = short_gap[0]
+        else:  # where the complementarity error is largest
+            c = int(np.argmax(np.linalg.norm(natural_map_residual(problem, P, actual),
+                                             axis=1)))
         a, b = int(contacts.alpha[c]), int(contacts.beta[c])
         name_a, name_b = (names[a], names[b]) if names is not None else (a, b)
         at = (node_position(lattice, contacts.node[c:c + 1])[0] if contacts.position is None
               else contacts.position[c])
-        if short_gap is not None:  # where the end-of-step gap did not settle
-            c = short_gap[0]
-            a, b = int(contacts.alpha[c]), int(contacts.beta[c])
-            name_a, name_b = (names[a], names[b]) if names is not None else (a, b)
-            at = contacts.position[c]
         where = ", ".join(f"{x:.6g}" for x in at)
-        bodies_left = [steps[i].stepper.name for i, ok in done.items() if not ok]
-        diag.message = (
-            f"step {step}: the end-of-step gaps did not settle in {GAP_UPDATES} re-solves "
-            f"(contact.end_gap_check): the true end gap between bodies '{name_a}' and "
-            f"'{name_b}' at ({where}) is {short_gap[1] / lattice.h:.3g} h, below its floor "
-            f"{short_gap[2] / lattice.h:.3g} h; the step moves the bodies too far for the "
-            "contact geometry at its start: try a smaller dt (or more [simulation] "
-            "retry_halvings)." if short_gap is not None else
-            f"step {step}: the contact loop "
-            + (f"stalled after {diag.iterations} iterations, no progress in the last "
-               f"{STALL_ITERATIONS}" if diag.stalled else
-               f"did not converge in {settings.max_iterations} iterations")
-            + f" (complementarity residual {diag.residual:.2e} of the largest "
-            f"impulse, tolerance {settings.tolerance:g}; {settings.relation} relation, "
-            f"{settings.solver} contact solver; largest error between bodies '{name_a}' and "
-            f"'{name_b}' at ({where})"
-            + (f"; bodies whose Newton residual is above its tolerance: "
-               f"{', '.join(bodies_left[:5])}" if bodies_left else "")
-            + ("); a cycle that more iterations do not cure: try a smaller dt (or more "
-               "[simulation] retry_halvings)." if diag.stalled else
-               "); try a smaller dt, more contact max_iterations"
-               + (", a looser contact tolerance or local_relation = \"delassus\"."
-                  if settings.relation == "lumped" else " or a looser contact tolerance.")))
+        if short_gap is not None:
+            diag.message = (
+                f"step {step}: the end-of-step gaps did not settle in {GAP_UPDATES} "
+                f"re-solves (contact.end_gap_check): the true end gap between bodies "
+                f"'{name_a}' and '{name_b}' at ({where}) is {short_gap[1] / lattice.h:.3g} h, "
+                f"below its floor {short_gap[2] / lattice.h:.3g} h; the step moves the "
+                "bodies too far for the contact geometry at its start: try a smaller dt (or "
+                "more [simulation] retry_halvings).")
+        else:
+            bodies_left = [steps[i].stepper.name for i, ok in done.items() if not ok]
+            diag.message = (
+                f"step {step}: the contact loop "
+                + (f"stalled after {diag.iterations} iterations, no progress in the last "
+                   f"{STALL_ITERATIONS}" if diag.stalled else
+                   f"did not converge in {settings.max_iterations} iterations")
+                + f" (complementarity residual {diag.residual:.2e} of the largest "
+                f"impulse, tolerance {settings.tolerance:g}; {settings.relation} relation, "
+                f"{settings.solver} contact solver; largest error between bodies '{name_a}' "
+                f"and '{name_b}' at ({where})"
+                + (f"; bodies whose Newton residual is above its tolerance: "
+                   f"{', '.join(bodies_left[:5])}" if bodies_left else "")
+                + ("); a cycle that more iterations do not cure: try a smaller dt (or more "
+                   "[simulation] retry_halvings)." if diag.stalled else
+                   "); try a smaller dt, more contact max_iterations"
+                   + (", a looser contact tolerance or local_relation = \"delassus\"."
+                      if settings.relation == "lumped" else " or a looser contact tolerance.")))
         diag.problem = problem
         if settings.on_failure == "stop":
             raise SimulationError(diag.message, kind="contact", step=step,
