@@ -312,7 +312,9 @@ class ContactSettings(_Section):
     end_gap_check: bool = Field(
         True, description="after each converged step, the point contacts' gaps evaluated "
         "at the end of the step (points and surfaces moved): where the linearised gap "
-        "missed an overlap below min(start gap, -0.025 h), the constraint is corrected and "
+        "missed an overlap below min(start gap, -0.025 h) (by 0.002 h; past 0.04 h by any "
+        "amount, so that small errors of one sign do not creep on), the constraint is "
+        "corrected and "
         "the step solved again (at most 3 times; a step whose gaps have not settled then "
         "is retried shorter). Keeps the linearisation's errors from adding up; the "
         "energy the corrections put in is series.csv's gap_correction_work")
