@@ -295,6 +295,28 @@ def test_a_dense_frictional_cluster_is_solved_by_the_tresca_fixed_point():
     _assert_signorini_coulomb(problem, result.impulse, 1e-6, 1e-5)
 
 
+def test_the_fallbacks_of_a_solve_stop_at_their_newton_budget(monkeypatch):
+    """The fixed-point fallbacks of one solve (Tresca, then after Gauss–Seidel the proximal
+    point) spend at most FALLBACK_NEWTON_BUDGET Newton iterations together, each a sparse
+    LU (session 24: a dense frictional compaction step with a grain near inversion spent
+    957 + 100 of them, 50 s, in a solve that ended worse than it started, against 24–75 for
+    the Tresca fixed points that converge). With the budget cut to 30 the dense cluster's
+    Tresca fixed point (69 iterations to converge) stops unconverged after its update that
+    passes 30, Gauss–Seidel runs its sweeps and the proximal point is not started."""
+    path = DATA / "dense_frictional_cluster.npz"
+    problem = ContactProblem.load(path)
+    with np.load(path) as data:
+        start = data["warm_start"]
+    options = ContactSolverOptions(tolerance=1e-6, max_iterations=50)
+    monkeypatch.setattr(solvers, "FALLBACK_NEWTON_BUDGET", 30)
+    proximal = []
+    monkeypatch.setattr(solvers, "_proximal_point", lambda *a: proximal.append(a))
+    result = solve(problem, start, options)
+    assert not result.converged and not proximal
+    newton = solvers.FRICTIONAL_NEWTON_ITERATIONS
+    assert result.iterations <= newton + 30 + options.max_iterations + solvers.NSGS_FALLBACK_SWEEPS
+
+
 def test_anderson_mixing_ends_the_cycle_of_a_linear_fixed_point_iteration():
     """x ↦ g(x) = B x + c with B's eigenvalues −1 (the plain iteration cycles between two
     points for ever, as the Tresca bounds did on dense frictional steps), 0.9 (it creeps)

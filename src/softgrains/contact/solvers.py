@@ -66,6 +66,12 @@ PROXIMAL_ITERATIONS = 100  # outer iterations of the proximal-point fallback (a 
 PROXIMAL_WEIGHT = 1e-3  # ε = this × the mean of W's diagonal (local frames)
 PROXIMAL_STAGNATION = 15  # ... it stops after this many outer iterations without a new best
 PROXIMAL_FAILED_INNER = 2  # ... or after this many regularised problems left unsolved
+# Newton iterations (each a sparse LU) the fixed-point fallbacks of one solve may spend
+# together: the Tresca fixed point of a dense frictional compaction step converges in
+# 24–75 (session 24, 14 steps), the proximal point in 50–106 (session 14); a hopeless
+# solve (a grain near inversion) took 957 + 100 (50 s) and ended worse than it started:
+# the coupling loop does better moving on (a new iterate, another tangent, a shorter step)
+FALLBACK_NEWTON_BUDGET = 200
 
 
 @dataclass(frozen=True)
@@ -121,9 +127,13 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
         # frictional compaction steps: 50 iterations wandering, then cycling at 0.05-0.4):
         # the Tresca problems are monotone on a PSD W. From the initial guess: the
         # Newton's iterates were no better a start there (measured on saved problems)
-        result = _better(result, _tresca_fixed_point(problem, P, options))
+        tresca = _tresca_fixed_point(problem, P, options, FALLBACK_NEWTON_BUDGET)
+        result = _better(result, tresca)
         if result.converged:
             return result
+        budget = FALLBACK_NEWTON_BUDGET - tresca.iterations
+    else:
+        budget = FALLBACK_NEWTON_BUDGET
     # Gauss–Seidel from the best iterate (cheap sweeps; seen to converge in 540 sweeps on a
     # frictional compaction step whose Newton stalled at 3e-2)
     sweeps = _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
@@ -136,7 +146,9 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     # method solves a sequence of regularised problems W + εI, each well posed (from the
     # initial guess: from the Newton's best iterate, where it may have been cycling, the
     # regularised Newton was seen to stall too)
-    return _better(result, _proximal_point(problem, P, options))
+    if budget <= 0:
+        return result
+    return _better(result, _proximal_point(problem, P, options, budget))
 
 
 def _better(first: ContactResult, second: ContactResult) -> ContactResult:
@@ -356,14 +368,15 @@ def _friction_bound(problem: ContactProblem, P: np.ndarray) -> np.ndarray:
 
 
 def _tresca_fixed_point(problem: ContactProblem, P: np.ndarray,
-                        options: ContactSolverOptions) -> ContactResult:
+                        options: ContactSolverOptions, budget: int) -> ContactResult:
     """Coulomb friction as a sequence of Tresca problems: the friction bound s of the
     current impulses held fixed, the problem (then monotone for a symmetric PSD W) solved
     by the semismooth Newton, s updated towards μ P_n(s) by Anderson mixing, until the
     Coulomb residual meets the tolerance (a fixed point s = μ P_n(s) solves the Coulomb
     problem). The plain update s ← μ P_n(s) was seen to cycle between two bounds on dense
     frictional compaction steps (residual 6e-2 ↔ 1e-1 for 40 updates); with the mixing the
-    same problems reach 1e-5 in 12-15 updates. Starts from P; returns its best iterate."""
+    same problems reach 1e-5 in 12-15 updates. Starts from P; stops after ``budget``
+    Newton iterations; returns its best iterate."""
     inner = replace(options, tolerance=TRESCA_TOLERANCE_FRACTION * options.tolerance)
     mixing = _AndersonMixing(TRESCA_MIXING_DEPTH)
     bound = None  # the friction bound of the last Tresca problem
@@ -378,7 +391,7 @@ def _tresca_fixed_point(problem: ContactProblem, P: np.ndarray,
     best = ContactResult(P, contact_status(problem, P), 0,
                          residual_norm(problem, P, floor=options.floor), False)
     return _fixed_point(problem, P, best, options, tresca, TRESCA_ITERATIONS,
-                        TRESCA_STAGNATION)
+                        TRESCA_STAGNATION, budget)
 
 
 class _AndersonMixing:
@@ -405,7 +418,7 @@ class _AndersonMixing:
 
 
 def _proximal_point(problem: ContactProblem, P: np.ndarray,
-                    options: ContactSolverOptions) -> ContactResult:
+                    options: ContactSolverOptions, budget: int) -> ContactResult:
     """The proximal point method: r_{k+1} solves the problem with w = q + W r + ε (r − r_k)
     (W + εI is positive definite for a PSD W, and well conditioned where W is singular:
     redundant contact sites), by the semismooth Newton; a fixed point r_{k+1} = r_k solves
@@ -414,7 +427,7 @@ def _proximal_point(problem: ContactProblem, P: np.ndarray,
     problems of per-point wall contacts (2026-12-03; one is tests/contact/data/
     per_point_wall_sites.npz): 1e-6 in 50–106 Newton iterations in all (about 10–30 outer
     ones), where the Newton and 500 Gauss–Seidel sweeps stopped at 1e-4. Starts from P;
-    returns its best iterate."""
+    stops after ``budget`` Newton iterations; returns its best iterate."""
     op = _local_operator(problem)
     epsilon = PROXIMAL_WEIGHT * float(op.W.diagonal().mean())
     best = ContactResult(P, contact_status(problem, P), 0,
@@ -429,15 +442,16 @@ def _proximal_point(problem: ContactProblem, P: np.ndarray,
 
     # with friction the regularised Newton can cycle too: stop after a few such failures
     return _fixed_point(problem, P, best, options, regularised, PROXIMAL_ITERATIONS,
-                        PROXIMAL_STAGNATION, PROXIMAL_FAILED_INNER)
+                        PROXIMAL_STAGNATION, budget, PROXIMAL_FAILED_INNER)
 
 
 def _fixed_point(problem: ContactProblem, P: np.ndarray, best: ContactResult,
                  options: ContactSolverOptions, update, max_updates: int, stagnation: int,
-                 failures: int | None = None) -> ContactResult:
+                 budget: int, failures: int | None = None) -> ContactResult:
     """P ← update(P).impulse until the problem's residual meets the tolerance, or
     ``stagnation`` updates pass without a better residual than ``best``'s, or ``failures``
-    updates are left unconverged (None: no limit); returns the best iterate."""
+    updates are left unconverged (None: no limit), or the updates have spent ``budget``
+    Newton iterations; returns the best iterate."""
     iterations, history, best_at, failed = 0, [], 0, 0
     for k in range(1, max_updates + 1):
         step = update(P)
@@ -453,6 +467,7 @@ def _fixed_point(problem: ContactProblem, P: np.ndarray, best: ContactResult,
             best = ContactResult(P, step.status, iterations, residual,
                                  residual <= options.tolerance)
             best_at = k
-        if residual <= options.tolerance or k - best_at >= stagnation:
+        if (residual <= options.tolerance or k - best_at >= stagnation
+                or iterations >= budget):
             break
     return replace(best, iterations=iterations, history=history)
