@@ -96,7 +96,7 @@ def main() -> None:
         between = active & (c.nodes.alpha == 0) & (c.nodes.beta == 1)
         plates = active & ~between
         s = sim.state
-        _, overlap = coverage(s.x[disks], s.F[disks], m.vol0[disks], m.body_id[disks],
+        _, overlap = coverage(s.x[disks], s.F[disks], m.reference_cells[disks], m.body_id[disks],
                               lower, upper)
         area = overlap * float(np.prod(upper - lower))
         if between.any():

@@ -13,7 +13,17 @@ from functools import cached_property
 import numpy as np
 
 from softgrains.errors import CaseError
-from softgrains.geometry import Disk, Polygon, Rectangle, Shape, seed_disk_rings, seed_points
+from softgrains.geometry import (
+    Disk,
+    PointCells,
+    Polygon,
+    Rectangle,
+    Shape,
+    disk_ring_cells,
+    lattice_cells,
+    seed_disk_rings,
+    seed_points,
+)
 from softgrains.grid.lattice import Lattice
 from softgrains.grid.shape_functions import SHAPE_FUNCTIONS
 from softgrains.integrator.implicit import DirichletBox, IntegratorSettings
@@ -67,6 +77,15 @@ class Model:
         """Indices of the points of deformable bodies (kinematic walls are driven)."""
         return np.concatenate([np.arange(b.points.start, b.points.stop)
                                for b in self.bodies if b.deformable] or [np.arange(0)])
+
+    @cached_property
+    def reference_cells(self) -> PointCells:
+        """Each point's reference cell (2D): the lattice square, or the ring sector of a
+        ring-seeded disk (geometry.PointCells)."""
+        spacing = self.lattice.h / self.points_per_cell
+        return PointCells.concatenate([
+            disk_ring_cells(body.shape, spacing) if body.seeding == "rings"
+            else lattice_cells(self.vol0[body.points], self.dim) for body in self.bodies])
 
 
 @dataclass

@@ -376,8 +376,10 @@ class SampleSettings(_Section):
         None, ge=0, description="gap left between grains and walls at the deposit [m] "
         "(default: one point spacing)")
     seeding: Literal["lattice", "rings"] = Field(
-        "lattice", description="material points of the grains: grid-aligned lattice or "
-        "concentric rings (see [[bodies]] seeding)")
+        "rings", description="material points of the grains: concentric rings (a round "
+        "grain of exactly its volume) or the grid-aligned lattice (a staircase whose "
+        "corners make the grains rough at the scale of the cell: the packing fraction "
+        "then moves with h; see [[bodies]] seeding)")
 
 
 class ProtocolSettings(_Section):

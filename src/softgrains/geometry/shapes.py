@@ -136,6 +136,19 @@ def seed_points(shape: Shape, origin: np.ndarray, h: float, n_pc: int) -> tuple[
     return x[shape.contains(x)], delta ** len(origin)
 
 
+def _disk_rings(disk: Disk, spacing: float):
+    """The rings of :func:`seed_disk_rings`: per ring its radius r_k, width Δr and the
+    angles of its points."""
+    rings = max(1, round(disk.radius / spacing))
+    dr = disk.radius / rings
+    turn = 0.0
+    for k in range(rings):
+        r = (k + 0.5) * dr
+        n = max(3, round(2.0 * np.pi * r / spacing))
+        yield r, dr, turn + 2.0 * np.pi * np.arange(n) / n
+        turn += np.pi / n
+
+
 def seed_disk_rings(disk: Disk, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Points of a disk on concentric rings; returns (x (n, 2), volume (n,)).
 
@@ -143,15 +156,49 @@ def seed_disk_rings(disk: Disk, spacing: float) -> tuple[np.ndarray, np.ndarray]
     n_k = max(3, round(2π r_k/δ)) points at equal angles (ring k turned by half a spacing
     against ring k − 1), each of volume 2π r_k Δr / n_k: the volumes add up to πR² exactly.
     """
-    rings = max(1, round(disk.radius / spacing))
-    dr = disk.radius / rings
     xs, vols = [], []
-    turn = 0.0
-    for k in range(rings):
-        r = (k + 0.5) * dr
-        n = max(3, round(2.0 * np.pi * r / spacing))
-        angle = turn + 2.0 * np.pi * np.arange(n) / n
+    for r, dr, angle in _disk_rings(disk, spacing):
         xs.append(np.column_stack([r * np.cos(angle), r * np.sin(angle)]))
-        vols.append(np.full(n, 2.0 * np.pi * r * dr / n))
-        turn += np.pi / n
+        vols.append(np.full(angle.size, 2.0 * np.pi * r * dr / angle.size))
     return np.concatenate(xs) + np.asarray(disk.center, dtype=float), np.concatenate(vols)
+
+
+@dataclass(frozen=True)
+class PointCells:
+    """Reference cells of 2D material points: per point a frame (n, 2, 2) whose columns
+    are the cell's axes e₁, e₂, and ``shape`` (n, 3): (a, b, 0) for a rectangle a × b
+    centred on the point along them (lattice points: δ × δ), or (r, Δr, α) for a ring
+    sector (radii r ± ½Δr, angles ±α about e₁ from the ring's centre, the point at r e₁
+    from it). Both have the point's volume as their area."""
+
+    frame: np.ndarray
+    shape: np.ndarray
+
+    def __getitem__(self, index) -> PointCells:
+        return PointCells(self.frame[index], self.shape[index])
+
+    @staticmethod
+    def concatenate(parts: list[PointCells]) -> PointCells:
+        return PointCells(np.concatenate([p.frame for p in parts]),
+                          np.concatenate([p.shape for p in parts]))
+
+
+def disk_ring_cells(disk: Disk, spacing: float) -> PointCells:
+    """The ring sectors of :func:`seed_disk_rings`' points, in the same order: frame
+    (e_r, e_θ) at each point, shape (r_k, Δr, π/n_k); area 2π r_k Δr/n_k, the point's
+    volume, and together they tile the disk."""
+    frames, shapes = [], []
+    for r, dr, angle in _disk_rings(disk, spacing):
+        c, s = np.cos(angle), np.sin(angle)
+        frames.append(np.stack([np.column_stack([c, -s]), np.column_stack([s, c])], axis=1))
+        shapes.append(np.tile([r, dr, np.pi / angle.size], (angle.size, 1)))
+    return PointCells(np.concatenate(frames), np.concatenate(shapes))
+
+
+def lattice_cells(vol0: np.ndarray, dim: int = 2) -> PointCells:
+    """Reference cells of lattice points: squares of side δ = √V0 along the axes."""
+    if dim != 2:
+        raise NotImplementedError("point cells are written for 2D")
+    side = np.sqrt(np.asarray(vol0, float))
+    return PointCells(np.tile(np.eye(2), (side.size, 1, 1)),
+                      np.column_stack([side, side, np.zeros(side.size)]))

@@ -52,7 +52,7 @@ def packing_coverage(model, state, walls: dict[str, int], grains: np.ndarray
                      ) -> dict[str, float]:
     """φ_covered and the overlap fraction of the grains' points (indices ``grains``)."""
     lower, upper = inner_box(model, state, walls)
-    phi, overlap = coverage(state.x[grains], state.F[grains], model.vol0[grains],
+    phi, overlap = coverage(state.x[grains], state.F[grains], model.reference_cells[grains],
                             model.body_id[grains], lower, upper)
     return {"phi_covered": phi, "overlap_fraction": overlap}
 

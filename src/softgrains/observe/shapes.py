@@ -22,6 +22,7 @@ import numpy as np
 from contourpy import contour_generator
 from scipy.ndimage import gaussian_filter
 
+from softgrains.geometry import lattice_cells
 from softgrains.observe.compaction import bearing_pairs
 from softgrains.observe.coverage import _raster
 
@@ -59,7 +60,8 @@ def grain_outline(x: np.ndarray, F: np.ndarray, side: np.ndarray,
     nx, ny = (int(np.ceil(s / pixel)) + 1 for s in (x.max(axis=0) + pad - lower))
     covered = np.zeros(nx * ny, np.int32)
     last = np.full(nx * ny, -1, np.int64)
-    _raster(np.ascontiguousarray(x, float), np.ascontiguousarray(F, float), side,
+    squares = lattice_cells(side**2).shape  # (the cells as squares of side s_p)
+    _raster(np.ascontiguousarray(x, float), np.ascontiguousarray(F, float), squares,
             np.zeros(len(x), np.int64), lower, pixel, pixel, nx, ny, covered, last)
     image = gaussian_filter(covered.reshape(nx, ny).astype(float),
                             BLUR_SPACINGS * pixels_per_spacing)
