@@ -338,6 +338,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             for b, ok in zip(slots.bodies, slots.semidefinite, strict=True))
         result = solve(problem, P, replace(
             options, tresca=psd, tolerance=tolerance, fallbacks=not switchable,
+            acceptable=max(settings.tolerance, tolerance),
             max_iterations=(min(options.max_iterations, INDEFINITE_NEWTON_ITERATIONS)
                             if switchable else options.max_iterations)))
         failed = result.residual > max(settings.tolerance, tolerance)
