@@ -214,9 +214,11 @@ def test_ring_seeded_disks_meet_at_their_boundaries(diameter_over_h):
     0.034–0.045 h too large at D/h 10 and 0.025–0.027 h at D/h 20 (the kernel surface sits
     0.017 h / 0.009 h inside a ring disk's boundary, the nearest ring point off the line of
     centres). Lattice-seeded disks (a staircase of point cells) read −0.16…+0.39 h at D/h 10
-    and −0.22…+0.39 h at D/h 20: their corners make the grains rough at the cell's scale,
-    and the compaction's φ0 then moves with h (0.681 at D/h 10, 0.696 at D/h 20, frictional
-    main job) — why ``[sample] seeding`` is "rings" by default."""
+    and −0.22…+0.39 h at D/h 20: their corners make the grains rough at the cell's scale
+    (the frictional main job's φ0: 0.681 at D/h 10, 0.696 at D/h 20, one sample) — why
+    ``[sample] seeding`` is "rings" by default. (Round grains' φ0 under h halving, four
+    seeds each: +0.7% ± 2.9% without friction, −1.9% ± 5.7% with μ = 0.5, 95% bands:
+    within the samples' spread; docs/dev-notes.md.)"""
     h = 1.0 / diameter_over_h
     rng = np.random.default_rng(1)
     errors = []
