@@ -319,14 +319,16 @@ def test_the_fallbacks_of_a_solve_stop_at_their_newton_budget(monkeypatch):
 
 def test_a_stalled_newton_the_caller_accepts_skips_the_fallbacks(monkeypatch):
     """``acceptable``: the coupling loop asks each solve for a tenth of its own tolerance
-    and accepts its own; a stalled Newton (or fallback) within that is returned, not
-    converged, instead of going on. Session 25 (frictional main job near 300 σ0, 2940
-    contacts, replayed from /tmp): the Coulomb Newton stopped at its 15 iterations 2–6e-5
-    from the solution where 1e-5 was asked and 1e-4 accepted, and the fallbacks took
-    0.9–2.4 s a solve for 9.98e-6–2.3e-5; with this 0.35 s, and steps 279 / 282 took 9.5 /
-    6.3 s instead of 18 / 36 s (the loop's iterations the same or fewer). Here the dense
+    and accepts half of it (coupling.ACCEPTABLE_FRACTION); a stalled Newton (or fallback)
+    within that is returned, not converged, instead of going on. Session 25 (frictional
+    main job near 300 σ0, 2940 contacts, replayed from /tmp): the Coulomb Newton stopped
+    at its 15 iterations 2–6e-5 from the solution where 1e-5 was asked, and the fallbacks
+    took 0.9–2.4 s a solve for 9.98e-6–2.3e-5; accepted, 0.35 s; steps 279 / 282 took 12.2
+    / 6.2 s instead of 18 / 36 s (the loop's iterations the same or fewer). Here the dense
     cluster, whose Newton cycles at 0.14: accepted at 0.2 the Tresca fixed point is not
-    started; at 0 (the default) it is, and converges."""
+    started; at 0 (the default) it is, and converges. (A Gauss–Seidel fallback stopped
+    when its residual did not halve in 100 sweeps was tried and not kept: the D11 sliding
+    block's loop then stalled at 1.44e-4 against its 1e-4 and was retried at Δt/2.)"""
     path = DATA / "dense_frictional_cluster.npz"
     problem = ContactProblem.load(path)
     with np.load(path) as data:
@@ -341,27 +343,6 @@ def test_a_stalled_newton_the_caller_accepts_skips_the_fallbacks(monkeypatch):
     assert accepted.iterations <= solvers.FRICTIONAL_NEWTON_ITERATIONS
     solved = solve(problem, start, ContactSolverOptions(tolerance=1e-6))
     assert calls and solved.converged
-
-
-def test_the_gauss_seidel_fallback_stops_when_it_stops_halving_its_residual():
-    """The Gauss–Seidel fallback (``_nsgs(..., progress=100)``) stops at the first
-    residual check that is not below half the residual 100 sweeps before (the start's
-    for the first): the same iterates as the plain sweeps up to there. Session 25 (near
-    300 σ0): its 500 sweeps took 1.4 s a solve and went 2.8e-4 → 1.5e-4, 3.3e-4 → 3.0e-4,
-    or ended worse than they started (the proximal point, from the initial guess, then
-    solved it). The dense cluster: 0.24 at the start, 0.0043 after 110 sweeps, 0.0023
-    after 500."""
-    path = DATA / "dense_frictional_cluster.npz"
-    problem = ContactProblem.load(path)
-    with np.load(path) as data:
-        start = data["warm_start"]
-    options = ContactSolverOptions("nsgs", 1e-6, solvers.NSGS_FALLBACK_SWEEPS)
-    plain = solvers._nsgs(problem, start.copy(), options)
-    cut = solvers._nsgs(problem, start.copy(), options, progress=100)
-    trace = [residual_norm(problem, start), *plain.history]  # every 10 sweeps
-    stop = next(i for i in range(10, len(trace)) if trace[i] > 0.5 * trace[i - 10])
-    assert cut.iterations == 10 * stop < plain.iterations
-    assert cut.history == plain.history[:stop]
 
 
 def test_anderson_mixing_ends_the_cycle_of_a_linear_fixed_point_iteration():

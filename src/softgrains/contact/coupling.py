@@ -76,6 +76,10 @@ AUTO_TANGENT_ITERATIONS = 10  # tangent = "auto": projected after this many iter
 AUTO_TANGENT_FAILED_SOLVES = 2  # ... or after this many unconverged contact solves
 SOLVE_TOLERANCE_FRACTION = 0.1  # each contact solve to this fraction of the loop's tolerance
 FORCING = 0.01  # ... or to this fraction of its residual at the start, if that is larger
+# ... and a solve stalled within this fraction of the loop's tolerance is taken as it is,
+# without the fallbacks (session 25; below 1: the loop converges on the iterates' own
+# residual, which the next Newton step changes)
+ACCEPTABLE_FRACTION = 0.5
 INDEFINITE = 1e-9  # a body's W with an eigenvalue below −this × its largest diagonal entry
 # a solve on an indefinite W that a tangent switch can mend: Newton only, this many
 # iterations (those that converged in a dense compaction took 9-11)
@@ -338,7 +342,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             for b, ok in zip(slots.bodies, slots.semidefinite, strict=True))
         result = solve(problem, P, replace(
             options, tresca=psd, tolerance=tolerance, fallbacks=not switchable,
-            acceptable=max(settings.tolerance, tolerance),
+            acceptable=max(ACCEPTABLE_FRACTION * settings.tolerance, tolerance),
             max_iterations=(min(options.max_iterations, INDEFINITE_NEWTON_ITERATIONS)
                             if switchable else options.max_iterations)))
         failed = result.residual > max(settings.tolerance, tolerance)

@@ -52,10 +52,6 @@ from softgrains.contact.problem import (
 METHODS = ("newton", "nsgs")
 LINE_SEARCH_HALVINGS = 12
 NSGS_FALLBACK_SWEEPS = 500  # Gauss–Seidel sweeps after a Newton solve that did not converge
-# ... stopped when its residual has not halved in this many sweeps (session 25: near 300 σ0
-# the fallback's 500 sweeps, 1.4 s, went 2.8e-4 → 1.5e-4 and 3.3e-4 → 3.0e-4, or ended
-# worse than they started; where it helps it converges from 3e-2 in 540 sweeps)
-NSGS_FALLBACK_PROGRESS = 100
 STAGNATION_ITERATIONS = 30  # Newton stops when its merit has not decreased in this many
 STAGNATION_DECREASE = 0.99  # ... iterations by at least this factor
 # with friction (and a PSD W) the Coulomb Newton gets this many iterations before the
@@ -131,8 +127,8 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
         options.max_iterations, FRICTIONAL_NEWTON_ITERATIONS)) if frictional else options)
     if result.converged or not options.fallbacks or result.residual <= options.acceptable:
         # (session 25: near 300 σ0 the frictional Newton stopped at its 15 iterations
-        # 2-6e-5 from the solution where 1e-5 was asked and 1e-4 accepted, and the
-        # fallbacks then took 2-6 s a solve, 5-9 solves a step)
+        # 2-6e-5 from the solution where the loop asked 1e-5 and accepts 5e-5, and the
+        # fallbacks then took 1-3 s a solve, 5-9 solves a step)
         return result
     if frictional:
         # the Alart–Curnier Newton has no global convergence with Coulomb friction (dense
@@ -149,8 +145,7 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     # Gauss–Seidel from the best iterate (cheap sweeps; seen to converge in 540 sweeps on a
     # frictional compaction step whose Newton stalled at 3e-2)
     sweeps = _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
-        "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor),
-        progress=NSGS_FALLBACK_PROGRESS)
+        "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor))
     result = _better(result, sweeps)
     if result.converged or result.residual <= options.acceptable:
         return result
@@ -181,16 +176,14 @@ def contact_status(problem: ContactProblem, P: np.ndarray) -> np.ndarray:
 
 
 # -- nonlinear Gauss–Seidel ---------------------------------------------------------------
-def _nsgs(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
-          progress: int = 0) -> ContactResult:
-    """Gauss–Seidel sweeps until the tolerance or ``max_iterations``; with ``progress``,
-    also when the residual has not halved in that many sweeps."""
+def _nsgs(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
+          ) -> ContactResult:
     V = problem.row_velocities(P)
     Q = np.zeros_like(V)
     status = np.zeros(problem.n_contacts, np.int64)
     history = []
     sweeps = 0
-    residual = start = residual_norm(problem, P, floor=options.floor)
+    residual = residual_norm(problem, P, floor=options.floor)
     chunk = 10  # sweeps between two residual evaluations
     while sweeps < options.max_iterations and residual > options.tolerance:
         n, _ = gauss_seidel(problem.a_slot, problem.a_col, problem.b_slot, problem.b_col,
@@ -203,10 +196,6 @@ def _nsgs(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
         history.append(residual)
         if not np.isfinite(residual):  # diverged (an indefinite W): the caller keeps a
             return ContactResult(P, status, sweeps, np.inf, False, history)  # better one
-        back = progress // chunk  # the residual `progress` sweeps ago (the start's first)
-        if progress and len(history) >= back and residual > 0.5 * (
-                history[-1 - back] if len(history) > back else start):
-            break
     return ContactResult(P, contact_status(problem, P), sweeps, residual,
                          residual <= options.tolerance, history)
 
