@@ -12,18 +12,25 @@ from softgrains.integrator.implicit import BodyStep
 H = 0.1
 
 
-def _body_step(shape_function: str, body: dict) -> BodyStep:
-    """The step of a single body at rest (D/h = 10 for the disk), not yet solved."""
+def _body_steps(bodies: list[dict], h: float = H, size: float = 2.0,
+                shape_function: str = "bspline2") -> dict[int, BodyStep]:
+    """The steps of bodies at rest (material "gel") on a square grid, not yet solved."""
     sim = Simulation(load_case({
         "simulation": {"dt": 1e-3, "steps": 1},
-        "grid": {"cell_size": H, "origin": [0.0, 0.0], "size": [2.0, 2.0],
+        "grid": {"cell_size": h, "origin": [0.0, 0.0], "size": [size, size],
                  "shape_function": shape_function},
         "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [{"name": "body", "material": "gel", **body}],
+        "bodies": [{"material": "gel", **body} for body in bodies],
         "output": {"progress": False},
     }))
     solver = sim.solver
-    return BodyStep(solver.steppers[0], solver.body_points(sim.state, 0), np.zeros(2), 1e-3, 0)
+    return {i: BodyStep(solver.steppers[i], solver.body_points(sim.state, i), np.zeros(2),
+                        1e-3, i) for i in range(len(bodies))}
+
+
+def _body_step(shape_function: str, body: dict) -> BodyStep:
+    """The step of a single body at rest (D/h = 10 for the disk), not yet solved."""
+    return _body_steps([{"name": "body", **body}], shape_function=shape_function)[0]
 
 
 DISK = {"shape": "disk", "center": [1.013, 1.0], "radius": 0.5}
@@ -192,18 +199,9 @@ def _pair_steps(h: float, seeding: str, separation: float, angle: float, shift):
     radius, direction = 0.5, np.array([np.cos(angle), np.sin(angle)])
     first = np.array([1.8, 1.8]) + shift - 0.5 * (2 * radius + separation) * direction
     centres = (first, first + (2 * radius + separation) * direction)
-    sim = Simulation(load_case({
-        "simulation": {"dt": 1e-3, "steps": 1},
-        "grid": {"cell_size": h, "origin": [0.0, 0.0], "size": [3.6, 3.6]},
-        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [{"name": f"disk{i}", "material": "gel", "shape": "disk",
-                    "center": list(c), "radius": radius, "seeding": seeding}
-                   for i, c in enumerate(centres)],
-        "output": {"progress": False},
-    }))
-    solver = sim.solver
-    return {i: BodyStep(solver.steppers[i], solver.body_points(sim.state, i), np.zeros(2),
-                        1e-3, i) for i in (0, 1)}
+    return _body_steps([{"name": f"disk{i}", "shape": "disk", "center": list(c),
+                         "radius": radius, "seeding": seeding}
+                        for i, c in enumerate(centres)], h=h, size=3.6)
 
 
 @pytest.mark.parametrize("diameter_over_h", [10, 20])

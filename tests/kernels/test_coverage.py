@@ -89,6 +89,7 @@ def test_ring_seeded_disks_cover_their_area(diameter_over_spacing):
     discs = [Disk(center=(0.35, 0.5), radius=R), Disk(center=(0.35 + d, 0.5), radius=R)]
     x, vol = seed_disk_rings(discs[0], spacing)
     cells = disk_ring_cells(discs[0], spacing)
+    assert np.allclose(cells.area(), vol, rtol=1e-12)  # each sector has its point's volume
     eye = np.tile(np.eye(2), (len(x), 1, 1))
     phi, overlap = coverage(x, eye, cells, np.zeros(len(x)), (0.0, 0.0), (1.0, 1.0))
     assert phi == pytest.approx(np.pi * R**2, rel=tolerance) and overlap == 0.0

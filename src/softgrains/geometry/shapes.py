@@ -177,6 +177,11 @@ class PointCells:
     def __getitem__(self, index) -> PointCells:
         return PointCells(self.frame[index], self.shape[index])
 
+    def area(self) -> np.ndarray:
+        """Each cell's area: a b for a rectangle, 2α r Δr for a ring sector."""
+        a, b, alpha = self.shape.T
+        return np.where(alpha == 0.0, a * b, 2.0 * alpha * a * b)
+
     @staticmethod
     def concatenate(parts: list[PointCells]) -> PointCells:
         return PointCells(np.concatenate([p.frame for p in parts]),

@@ -93,9 +93,7 @@ def coverage(x: np.ndarray, F: np.ndarray, cells: PointCells, grain: np.ndarray,
     if np.count_nonzero(np.diff(grain)) + 1 > np.unique(grain).size:
         raise ValueError("coverage: the points must come grouped by grain")
     shape = np.ascontiguousarray(cells.shape, dtype=float)
-    area = np.where(shape[:, 2] == 0.0, shape[:, 0] * shape[:, 1],
-                    2.0 * shape[:, 0] * shape[:, 1] * shape[:, 2])
-    target = float(np.median(np.sqrt(area))) / PIXELS_PER_SPACING
+    target = float(np.median(np.sqrt(cells.area()))) / PIXELS_PER_SPACING
     size = np.asarray(upper, float) - np.asarray(lower, float)
     # pixels that tile the box exactly (about δ/4 on each axis)
     nx, ny = (max(int(np.ceil(s / target)), 1) for s in size)
