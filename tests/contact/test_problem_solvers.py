@@ -345,6 +345,58 @@ def test_a_stalled_newton_the_caller_accepts_skips_the_fallbacks(monkeypatch):
     assert calls and solved.converged
 
 
+def test_gauss_seidel_sweeps_bring_a_far_warm_start_near_for_the_newton():
+    """``warmup``: WARMUP_SWEEPS Gauss–Seidel sweeps before the Newton (session 26). The
+    first solve of a dense compaction step starts from the previous step's impulses, far
+    from the solution once the walls have moved (relative residual 0.2–0.9); the Newton
+    then crawls (line-search steps of 1e-4–0.5) and, with friction, hands over to the
+    Tresca fixed point. Measured on the two saved compaction problems (2026-12-04):
+    step28 53 → 2 Newton iterations to 1e-6; the dense cluster 43 → 6 to the loose
+    tolerance 5e-3 of a step's first solve (coupling.FORCING), 69 → 56 to 1e-6. The same
+    solution: the sweeps only move the start."""
+    for name, tolerance, without_more_than, with_at_most in (
+            ("frictional_compaction_step28", 1e-6, 40, 5),
+            ("dense_frictional_cluster", 5e-3, 30, 10)):
+        path = DATA / f"{name}.npz"
+        problem = ContactProblem.load(path)
+        with np.load(path) as data:
+            start = data["warm_start"] if "warm_start" in data else None
+        plain = solve(problem, start, ContactSolverOptions(tolerance=tolerance, warmup=0))
+        warm = solve(problem, start, ContactSolverOptions(tolerance=tolerance))
+        assert plain.converged and warm.converged
+        assert warm.warmup == solvers.WARMUP_SWEEPS and plain.warmup == 0
+        assert plain.iterations > without_more_than and warm.iterations <= with_at_most
+        assert residual_norm(problem, warm.impulse) <= tolerance
+
+
+def test_a_warm_up_within_the_tolerance_is_made_exact_by_a_newton_step():
+    """Sweeps that already meet the tolerance leave a complementarity error of its size
+    (a colliding disk then gained 1e-8 of its kinetic energy: tests/contact/
+    test_coupling.py); one Newton step on their active set makes the solution exact, and
+    a solve never returns the sweeps alone."""
+    n = 20  # a chain of frictionless contacts, each coupled to its neighbours
+    W = np.eye(2 * n)
+    for c in range(n - 1):
+        W[2 * c, 2 * c + 2] = W[2 * c + 2, 2 * c] = 0.45
+    normal = np.tile([1.0, 0.0], (n, 1))
+    problem = one_body_problem(W, -normal, normal)
+    sweeps = solvers._nsgs(problem, np.zeros((n, 2)), ContactSolverOptions(
+        "nsgs", 5e-2, solvers.WARMUP_SWEEPS))
+    assert sweeps.converged and sweeps.residual > 1e-6  # within 5e-2, not exact
+    result = solve(problem, None, ContactSolverOptions(tolerance=5e-2))
+    assert result.iterations >= 1 and result.warmup > 0
+    assert residual_norm(problem, result.impulse) <= 1e-12
+
+
+def test_sweeps_that_make_the_start_worse_are_dropped():
+    """On an indefinite W (an exact tangent under compression) the sweeps can diverge: the
+    Newton then starts from P0 as without them."""
+    W = np.array([[1.0, 0.0, 1.5, 0.0], [0.0, 1.0, 0.0, 0.0],
+                  [1.5, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]])  # eigenvalue −0.5
+    problem = one_body_problem(W, [[0.0, -1.0], [0.0, -1.0]], [[1.0, 0.0], [1.0, 0.0]])
+    assert solvers._warmup(problem, np.zeros((2, 2)), ContactSolverOptions()) is None
+
+
 def test_anderson_mixing_ends_the_cycle_of_a_linear_fixed_point_iteration():
     """x ↦ g(x) = B x + c with B's eigenvalues −1 (the plain iteration cycles between two
     points for ever, as the Tresca bounds did on dense frictional steps), 0.9 (it creeps)

@@ -367,7 +367,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 slots.W = [None] * len(slots.W)
                 progress.restart()
                 continue
-        diag.sweeps += result.iterations
+        diag.sweeps += result.iterations + result.warmup
         # the combined step: Newton direction plus the response to the impulse changes,
         # du + X ΔQ = −A⁻¹ R(u; P_new), taken with the line search
         change = problem.row_impulses(result.impulse - P)

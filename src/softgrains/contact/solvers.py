@@ -72,6 +72,12 @@ PROXIMAL_FAILED_INNER = 2  # ... or after this many regularised problems left un
 # solve (a grain near inversion) took 957 + 100 (50 s) and ended worse than it started:
 # the coupling loop does better moving on (a new iterate, another tangent, a shorter step)
 FALLBACK_NEWTON_BUDGET = 200
+# Gauss–Seidel sweeps before the Newton (session 26): a warm start far from the solution
+# (the first solve of a dense compaction step, residual ~0.5 after the walls moved) cost
+# the Coulomb Newton its 15 iterations without progress (line-search steps of 1e-4..0.5)
+# and the Tresca fixed point 40-100 more; 20 sweeps (~30 ms on 2600 contacts) bring it to
+# ~1e-2, from where the Newton meets the solve's tolerance in 2-15 iterations
+WARMUP_SWEEPS = 20
 
 
 @dataclass(frozen=True)
@@ -87,7 +93,8 @@ class ContactSolverOptions:
     ``acceptable``: a residual the caller accepts although above ``tolerance`` (the coupling
     loop's own tolerance, while it asks each solve for a tenth of it): a stalled Newton or
     fallback that reaches it is returned (not converged) instead of going on to the next
-    fallback."""
+    fallback; ``warmup``: Gauss–Seidel sweeps before the Newton (its start is the better of
+    P0 and theirs; 0: none)."""
 
     method: str = "newton"
     tolerance: float = 1e-6
@@ -96,6 +103,7 @@ class ContactSolverOptions:
     tresca: bool = True  # the Tresca fixed point as the first fallback (needs W symmetric PSD)
     fallbacks: bool = True  # after a stalled Newton (they presume a monotone problem)
     acceptable: float = 0.0
+    warmup: int = WARMUP_SWEEPS
 
     def __post_init__(self) -> None:
         if self.method not in METHODS:
@@ -104,7 +112,9 @@ class ContactSolverOptions:
 
 @dataclass
 class ContactResult:
-    """Impulses (n, d) on α, per-contact status, iterations, residual, convergence."""
+    """Impulses (n, d) on α, per-contact status, iterations (Newton iterations, or sweeps
+    of the ``nsgs`` method and of a fallback), residual, convergence; ``warmup``: the
+    Gauss–Seidel sweeps before the Newton."""
 
     impulse: np.ndarray
     status: np.ndarray
@@ -112,6 +122,7 @@ class ContactResult:
     residual: float
     converged: bool
     history: list[float] = field(default_factory=list)
+    warmup: int = 0
 
 
 def solve(problem: ContactProblem, P0: np.ndarray | None = None,
@@ -122,9 +133,19 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
         return ContactResult(P, np.zeros(0, np.int64), 0, 0.0, True)
     if options.method == "nsgs":
         return _nsgs(problem, P, options)
+    # (a warm-up that meets the tolerance still goes on to the Newton: its active set makes
+    # the solution exact, where the sweeps leave a complementarity error of the tolerance's
+    # size, e.g. an energy gain of 1e-8 of a colliding disk's kinetic energy)
+    warmup = _warmup(problem, P, options)
+    if warmup is not None:
+        P = warmup.impulse
     frictional = options.tresca and options.fallbacks and bool(np.any(problem.mu > 0.0))
     result = _newton(problem, P, replace(options, max_iterations=min(
-        options.max_iterations, FRICTIONAL_NEWTON_ITERATIONS)) if frictional else options)
+        options.max_iterations, FRICTIONAL_NEWTON_ITERATIONS)) if frictional else options,
+        polish=warmup is not None)
+    if warmup is not None:
+        result = replace(result, warmup=warmup.iterations,
+                         history=warmup.history + result.history)
     if result.converged or not options.fallbacks or result.residual <= options.acceptable:
         # (session 25: near 300 σ0 the frictional Newton stopped at its 15 iterations
         # 2-6e-5 from the solution where the loop asked 1e-5 and accepts 5e-5, and the
@@ -159,11 +180,24 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     return _better(result, _proximal_point(problem, P, options, budget))
 
 
+def _warmup(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
+            ) -> ContactResult | None:
+    """``options.warmup`` Gauss–Seidel sweeps from P: their result where it is better than
+    P (a lower residual), else None (e.g. diverging sweeps on an indefinite W)."""
+    if options.warmup <= 0:
+        return None
+    sweeps = _nsgs(problem, P.copy(), ContactSolverOptions(
+        "nsgs", options.tolerance, options.warmup, options.floor))
+    start = residual_norm(problem, P, floor=options.floor)
+    return sweeps if sweeps.residual < start else None
+
+
 def _better(first: ContactResult, second: ContactResult) -> ContactResult:
     """The result with the smaller residual, with the iterations and history of both."""
     best = second if second.residual < first.residual else first
     return ContactResult(best.impulse, best.status, first.iterations + second.iterations,
-                         best.residual, best.converged, first.history + second.history)
+                         best.residual, best.converged, first.history + second.history,
+                         first.warmup + second.warmup)
 
 
 def contact_status(problem: ContactProblem, P: np.ndarray) -> np.ndarray:
@@ -300,11 +334,13 @@ class _Proximal:
 
 
 def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
-            threshold: np.ndarray | None = None, proximal: _Proximal | None = None
-            ) -> ContactResult:
+            threshold: np.ndarray | None = None, proximal: _Proximal | None = None,
+            polish: bool = False) -> ContactResult:
     """Semismooth Newton on the Alart–Curnier function from P (Coulomb; with ``threshold``
     the Tresca problem of that fixed friction bound; with ``proximal`` the regularised
-    problem w = q + (W + εI) r − ε r_k; in both cases the residual is its own Φ)."""
+    problem w = q + (W + εI) r − ε r_k; in both cases the residual is its own Φ). With
+    ``polish``, at least one iteration even from a P within the tolerance (a start from
+    Gauss–Seidel sweeps: one step on their active set makes the solution exact)."""
     n, d = problem.n_contacts, problem.dim
     op = _local_operator(problem)
     frames, movable, rho = op.frames, op.movable, op.rho
@@ -336,7 +372,8 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
     history.append(residual)
     best = (residual, r, iterations)
     progress = (merit, iterations)  # the merit at its last real decrease
-    while (residual > options.tolerance and iterations < options.max_iterations
+    while ((residual > options.tolerance or (polish and iterations == 0))
+           and iterations < options.max_iterations
            and iterations - progress[1] < STAGNATION_ITERATIONS):
         iterations += 1
         dr = _newton_step(lin, rho, op.blocks, shift)

@@ -52,7 +52,7 @@ from softgrains.integrator.assembly import (
     pair_codes,
     point_stresses,
 )
-from softgrains.integrator.linear_solvers import LinearSolver
+from softgrains.integrator.linear_solvers import LinearSolver, factorize
 
 ACTIVE_MASS_FRACTION = 1e-4  # lighter nodes (fraction of the heaviest point) are removed
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
@@ -386,11 +386,11 @@ class BodyStep:
         return X, kappa * X[dofs]
 
     def factorization(self):
-        """Sparse LU of the current Newton matrix A (reused from a direct Newton solve)."""
+        """The LU of the current Newton matrix A (reused from a direct Newton solve)."""
         if self._lu is None:
             if self._A is None:
                 self._A = self.newton_matrix()
-            self._lu = spla.splu(self._A.tocsc(), permc_spec="MMD_AT_PLUS_A")
+            self._lu = factorize(self._A)
         return self._lu
 
     # -- Newton ------------------------------------------------------------------------
