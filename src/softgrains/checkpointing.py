@@ -70,6 +70,7 @@ def snapshot(sim) -> tuple[dict[str, np.ndarray], dict[str, object]]:
         "largest_penetration": sim.largest_penetration,
         "dt_factor": sim.dt_factor, "steps_at_factor": sim.steps_at_factor,
         "smallest_dt_factor": sim.smallest_dt_factor,
+        "grain_speed": sim.grain_speed, "reach_retries": sim.reach_retries,
         "last_row": sim._rows[-1] if sim._rows else None,
         "protocol": copy.deepcopy(sim.protocol.state_dict())
         if sim.protocol is not None else None,
@@ -140,6 +141,9 @@ def restore(sim, arrays: dict[str, np.ndarray], meta: dict[str, object]) -> None
     sim.dt_factor = float(meta.get("dt_factor", 1.0))
     sim.steps_at_factor = int(meta.get("steps_at_factor", 0))
     sim.smallest_dt_factor = float(meta.get("smallest_dt_factor", 1.0))
+    speed = meta.get("grain_speed")  # (none before session 26: the full reach first)
+    sim.grain_speed = None if speed is None else float(speed)
+    sim.reach_retries = int(meta.get("reach_retries", 0))
     sim._rows = [meta["last_row"]] if meta["last_row"] is not None else []
     sim._protocol_row = dict(meta["protocol_row"] or {})
     if sim.protocol is not None:

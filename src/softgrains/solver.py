@@ -77,8 +77,10 @@ class Solver:
                           sigma=state.sigma[sl], vol=state.vol[sl], mass=m.mass[sl],
                           vol0=m.vol0[sl], law=m.law[sl], lam=m.lam[sl], mu=m.mu[sl])
 
-    def step(self, state: State, dt: float) -> StepDiagnostics:
-        """Advance the state by dt in place (bodies coupled by contact when enabled)."""
+    def step(self, state: State, dt: float, cutoff: float | None = None) -> StepDiagnostics:
+        """Advance the state by dt in place (bodies coupled by contact when enabled);
+        ``cutoff``: the farthest gap at which a point contact is taken (None: the kernel's
+        reach)."""
         model = self.model
         diag = StepDiagnostics()
         steps = {b.index: BodyStep(self.steppers[b.index], self.body_points(state, b.index),
@@ -105,7 +107,7 @@ class Solver:
                 if contact.gap else None,
                 spacing=model.lattice.h / model.points_per_cell,
                 reach=0.5 * stencil_width(model.shape_kind) * model.lattice.h
-                * np.sqrt(model.dim), warm=state.contacts,
+                * np.sqrt(model.dim), cutoff=cutoff, warm=state.contacts,
                 names=[b.name for b in model.bodies],
                 round_bodies={b.index for b in model.bodies if b.seeding == "rings"})
             state.contacts = diag.contacts

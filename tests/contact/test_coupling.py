@@ -285,3 +285,43 @@ def test_the_coupling_loop_gives_up_on_a_cycle_but_not_on_slow_progress():
         assert not restarted.stalled(m)
     restarted.restart()  # a new tangent: the best is forgotten
     assert not restarted.stalled(5.0)
+
+
+def _kicked_disk(adaptive: bool) -> tuple[Simulation, np.ndarray, float]:
+    """``_thrown_disk`` at rest, its front point 0.9 h from the slab's face (the edge of
+    its cell, h/4 ahead, 0.65 h), for one step (its points then move 0: the next step's
+    contacts are searched only 0.5 h out), then kicked to 0.95 h a step towards the slab:
+    the front's cell reaches the face within the step."""
+    sim = _thrown_disk(1.0, speed=0.0, contact={"adaptive_reach": adaptive})
+    disk = np.arange(sim.model.n_points)[sim.model.bodies[0].points]
+    h, face = 0.05, 0.7
+    sim.state.x[disk, 0] += face - 0.9 * h - sim.state.x[disk, 0].max()
+    sim.step()
+    sim.state.v[disk] = [0.95 * h / 0.01, 0.0]
+    return sim, disk, face
+
+
+def test_a_step_whose_points_outran_its_contact_search_is_redone_with_the_full_reach(
+        monkeypatch):
+    """contact.adaptive_reach (session 26): a step's point contacts are searched only to a
+    gap of 2 × the relative motion the last step predicts (at least 0.5 h), not the
+    kernel's full reach (~2.1 h): a dense compaction step then carries 1400 contacts
+    instead of 2640, 480 of them loaded either way. A step whose points moved farther
+    than its search allowed is redone with the full reach, and is then the step a full
+    reach gives (measured: the front point stops 0.247 h before the face, its cell's edge
+    at the face); without that check the kicked disk's front point ends 0.05 h inside the
+    slab, found by no contact."""
+    results = {}
+    for adaptive in (True, False):
+        sim, disk, face = _kicked_disk(adaptive)
+        sim.step()
+        results[adaptive] = (sim.state.x.copy(), sim.reach_retries)
+    (x_adaptive, redone), (x_full, never) = results[True], results[False]
+    assert redone == 1 and never == 0
+    assert np.array_equal(x_adaptive, x_full)
+    h = 0.05
+    assert x_adaptive[disk, 0].max() < face - 0.2 * h  # its cell's edge stops at the face
+    monkeypatch.setattr(Simulation, "_check_reach", lambda *args: None)
+    sim, disk, face = _kicked_disk(True)
+    sim.step()
+    assert sim.reach_retries == 0 and sim.state.x[disk, 0].max() > face - 0.1 * h

@@ -318,6 +318,12 @@ class ContactSettings(_Section):
         "the step solved again (at most 3 times; a step whose gaps have not settled then "
         "is retried shorter). Keeps the linearisation's errors from adding up; the "
         "energy the corrections put in is series.csv's gap_correction_work")
+    adaptive_reach: bool = Field(
+        True, description="look for a step's point contacts only as far as the grains can "
+        "move in it: within 2 x the relative motion the last step's fastest point predicts "
+        "(at least 0.5 h; at most the kernel's reach, ~2 h); a step whose points then "
+        "moved farther than that allowed is redone with the full reach (logged, "
+        "summary.json contact_reach_retries). false: always the full reach")
     overlap_removal: float = Field(
         0.0, ge=0.0, le=1.0, description="fraction of an estimated overlap between two "
         "bodies removed per step (0: overlaps are only kept from growing)")

@@ -207,6 +207,7 @@ def _keys(nodes: ContactNodes) -> list[tuple[int, int, int, int]]:
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls: dict,
                   settings: CouplingSettings, friction: Callable, step: int, dt: float,
                   gap_points: dict | None = None, spacing: float = 0.0, reach: float = 0.0,
+                  cutoff: float | None = None,
                   warm: ContactState | None = None, names: list[str] | None = None,
                   round_bodies: set[int] | frozenset = frozenset()
                   ) -> tuple[ContactState, ContactDiagnostics]:
@@ -215,8 +216,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     ``walls`` maps a kinematic body's index to (prescribed velocity, current shape): exact
     face normals against walls. ``friction(alpha, beta)`` gives μ per contact. With
     ``gap_points`` (body index → start-of-step point positions) the boundary gap of gap.py
-    is used. ``warm``: the previous step's contacts (warm start). ``names``: body names
-    for the messages.
+    is used (``reach``: the stencil's; point contacts only up to a gap of ``cutoff`` where
+    that is smaller: the caller's bound on the step's motion). ``warm``: the previous
+    step's contacts (warm start). ``names``: body names for the messages.
     """
     contacts = find_contact_nodes(lattice, fields, {b: s for b, (_, s) in walls.items()},
                                   settings.normal)
@@ -240,7 +242,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # the pairs taken at points leave the nodal set before its gaps are estimated
         contacts, points = point_contacts(
             lattice, steps, walls if walls_at_points else {}, contacts,
-            spacing, reach, settings.grain_sites == "surface")
+            spacing, reach if cutoff is None else min(reach, cutoff),
+            settings.grain_sites == "surface")
         gaps = np.zeros(len(contacts))
     if gap_points is not None and len(contacts):
         X = node_position(lattice, contacts.node)
