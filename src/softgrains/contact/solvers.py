@@ -290,7 +290,12 @@ def _newton_step(lin: _Linearised, rho: np.ndarray, blocks: sp.bsr_matrix,
     J_ee, coupling = engaged_jacobian(blocks, lin.G, rho, engaged, dr, shift)
     rhs = dr[engaged] - coupling
     try:  # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
-        step = spla.splu(J_ee.T).solve(rhs, trans="T")
+        # (J_EE's pattern is symmetric, its diagonal strong: pivoting on the diagonal where
+        # it is within 0.1 of the column's largest entry, on an ordering of J + Jᵀ, left
+        # a fifth less fill and took 3.9 ms against 4.9 ms on 912 engaged rows of a dense
+        # compaction step, session 26)
+        step = spla.splu(J_ee.T, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
+                         options={"SymmetricMode": True}).solve(rhs, trans="T")
     except RuntimeError:
         step = None
     if step is None or not np.all(np.isfinite(step)):
