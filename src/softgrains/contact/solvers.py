@@ -22,9 +22,12 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   it gets FRICTIONAL_NEWTON_ITERATIONS, then the **Tresca fixed point** from the initial
   guess: the friction bound s = μ P_n
   held, the Tresca problem (monotone for a symmetric PSD W) solved by the same Newton, s
-  updated with Anderson mixing; then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps from
-  the best iterate, then the **proximal point** loop (W + εI, well posed where redundant
-  sites make W singular). Dimension-generic (the 3D cone's projection is exact).
+  updated with Anderson mixing; then the **proximal point** loop (W + εI, well posed where
+  redundant sites make W singular), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps
+  from the best iterate (without friction, or on an indefinite W, the sweeps come before
+  the proximal point, as all did before session 26). Every Newton starts
+  from WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess.
+  Dimension-generic (the 3D cone's projection is exact).
 - ``nsgs``: nonlinear Gauss–Seidel over contacts with the exact local solution
   (gauss_seidel.py).
 """
@@ -163,21 +166,29 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
         budget = FALLBACK_NEWTON_BUDGET - tresca.iterations
     else:
         budget = FALLBACK_NEWTON_BUDGET
-    # Gauss–Seidel from the best iterate (cheap sweeps; seen to converge in 540 sweeps on a
-    # frictional compaction step whose Newton stalled at 3e-2)
-    sweeps = _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
-        "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor))
-    result = _better(result, sweeps)
-    if result.converged or result.residual <= options.acceptable:
-        return result
     # a (nearly) singular W — contact sites that outnumber the velocity modes they sample,
-    # e.g. the points of a flat face against a wall — stalls both: the proximal point
+    # e.g. the points of a flat face against a wall — stalls the Newton: the proximal point
     # method solves a sequence of regularised problems W + εI, each well posed (from the
     # initial guess: from the Newton's best iterate, where it may have been cycling, the
-    # regularised Newton was seen to stall too)
-    if budget <= 0:
-        return result
-    return _better(result, _proximal_point(problem, P, options, budget))
+    # regularised Newton was seen to stall too); and Gauss–Seidel from the best iterate
+    # (cheap sweeps; seen to converge in 540 sweeps on a frictional compaction step whose
+    # Newton stalled at 3e-2). After a Tresca fixed point the proximal point comes first
+    # (session 26: in a dense frictional step near 300 σ0, 1620 contacts, four solves ran
+    # 500 sweeps each, 0.5–1.1 s, for 4.5–5.3e-4, and the proximal point after them met the
+    # loop's tolerance anyway); without friction the sweeps do (the quasi-static D10
+    # squeeze's loop stalled at its step 47 with the proximal point first)
+    stages = ["proximal", "sweeps"] if frictional else ["sweeps", "proximal"]
+    for stage in stages:
+        if stage == "proximal":
+            if budget <= 0:
+                continue
+            result = _better(result, _proximal_point(problem, P, options, budget))
+        else:
+            result = _better(result, _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
+                "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor)))
+        if result.converged or result.residual <= options.acceptable:
+            break
+    return result
 
 
 def _warmup(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
@@ -290,12 +301,10 @@ def _newton_step(lin: _Linearised, rho: np.ndarray, blocks: sp.bsr_matrix,
     J_ee, coupling = engaged_jacobian(blocks, lin.G, rho, engaged, dr, shift)
     rhs = dr[engaged] - coupling
     try:  # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
-        # (J_EE's pattern is symmetric, its diagonal strong: pivoting on the diagonal where
-        # it is within 0.1 of the column's largest entry, on an ordering of J + Jᵀ, left
-        # a fifth less fill and took 3.9 ms against 4.9 ms on 912 engaged rows of a dense
-        # compaction step, session 26)
-        step = spla.splu(J_ee.T, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.1,
-                         options={"SymmetricMode": True}).solve(rhs, trans="T")
+        # (SuperLU's symmetric mode with diagonal pivoting within 0.1 took 3.9 ms against
+        # 4.9 ms on 912 engaged rows of a dense compaction step, but its other round-off
+        # made the quasi-static D10 squeeze's loop stall at step 47: not kept, session 26)
+        step = spla.splu(J_ee.T).solve(rhs, trans="T")
     except RuntimeError:
         step = None
     if step is None or not np.all(np.isfinite(step)):
