@@ -25,7 +25,7 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   updated with Anderson mixing; then the **proximal point** loop (W + εI, well posed where
   redundant sites make W singular), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps
   from the best iterate (without friction, or on an indefinite W, the sweeps come before
-  the proximal point, as all did before session 26). Every Newton starts
+  the proximal point, as they all did before session 26). Every Newton starts
   from WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess.
   Dimension-generic (the 3D cone's projection is exact).
 - ``nsgs``: nonlinear Gauss–Seidel over contacts with the exact local solution
@@ -175,8 +175,8 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     # Newton stalled at 3e-2). After a Tresca fixed point the proximal point comes first
     # (session 26: in a dense frictional step near 300 σ0, 1620 contacts, four solves ran
     # 500 sweeps each, 0.5–1.1 s, for 4.5–5.3e-4, and the proximal point after them met the
-    # loop's tolerance anyway); without friction the sweeps do (the quasi-static D10
-    # squeeze's loop stalled at its step 47 with the proximal point first)
+    # loop's tolerance anyway); without friction, where no case was measured against it,
+    # the order stays as it was
     stages = ["proximal", "sweeps"] if frictional else ["sweeps", "proximal"]
     for stage in stages:
         if stage == "proximal":
