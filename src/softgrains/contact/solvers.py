@@ -19,8 +19,8 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   while the merit still falls: it stops only when ½‖Φ‖² has not fallen by 1% in
   STAGNATION_ITERATIONS). With friction it can stall or cycle (no global convergence for
   the non-associated Coulomb law): where ``options.tresca`` allows it (a symmetric PSD W)
-  it gets FRICTIONAL_NEWTON_ITERATIONS, then the **Tresca fixed point** from its best
-  iterate: the friction bound s = μ P_n
+  it gets FRICTIONAL_NEWTON_ITERATIONS, then the **Tresca fixed point** from the initial
+  guess: the friction bound s = μ P_n
   held, the Tresca problem (monotone for a symmetric PSD W) solved by the same Newton, s
   updated with Anderson mixing; then the **proximal point** loop (W + εI, well posed where
   redundant sites make W singular), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps
@@ -157,12 +157,9 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     if frictional:
         # the Alart–Curnier Newton has no global convergence with Coulomb friction (dense
         # frictional compaction steps: 50 iterations wandering, then cycling at 0.05-0.4):
-        # the Tresca problems are monotone on a PSD W. From the Newton's best iterate
-        # since session 26 (after the warm-up sweeps it is the better start: 38 solves of
-        # dense compaction steps at 150 and 280 σ0 took 9.97 → 8.68 s, 739 → 622 Newton
-        # iterations; before the sweeps the initial guess was no worse a start)
-        tresca = _tresca_fixed_point(problem, result.impulse, options,
-                                     FALLBACK_NEWTON_BUDGET)
+        # the Tresca problems are monotone on a PSD W. From the initial guess: the
+        # Newton's iterates were no better a start there (measured on saved problems)
+        tresca = _tresca_fixed_point(problem, P, options, FALLBACK_NEWTON_BUDGET)
         result = _better(result, tresca)
         if result.converged or result.residual <= options.acceptable:
             return result
