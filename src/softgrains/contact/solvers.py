@@ -177,18 +177,26 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     # 500 sweeps each, 0.5–1.1 s, for 4.5–5.3e-4, and the proximal point after them met the
     # loop's tolerance anyway); without friction, where no case was measured against it,
     # the order stays as it was
-    stages = ["proximal", "sweeps"] if frictional else ["sweeps", "proximal"]
-    for stage in stages:
-        if stage == "proximal":
-            if budget <= 0:
-                continue
-            result = _better(result, _proximal_point(problem, P, options, budget))
-        else:
-            result = _better(result, _nsgs(problem, result.impulse.copy(), ContactSolverOptions(
-                "nsgs", options.tolerance, NSGS_FALLBACK_SWEEPS, options.floor)))
+    def proximal(best: ContactResult) -> ContactResult:
+        if budget <= 0:
+            return best
+        return _better(best, _proximal_point(problem, P, options, budget))
+
+    def sweeps(best: ContactResult) -> ContactResult:
+        return _better(best, _sweeps(problem, best.impulse, options, NSGS_FALLBACK_SWEEPS))
+
+    for stage in (proximal, sweeps) if frictional else (sweeps, proximal):
+        result = stage(result)
         if result.converged or result.residual <= options.acceptable:
             break
     return result
+
+
+def _sweeps(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
+            count: int) -> ContactResult:
+    """``count`` Gauss–Seidel sweeps from P (a copy) to ``options``' tolerance and floor."""
+    return _nsgs(problem, P.copy(), ContactSolverOptions(
+        "nsgs", options.tolerance, count, options.floor))
 
 
 def _warmup(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
@@ -197,8 +205,7 @@ def _warmup(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
     P (a lower residual), else None (e.g. diverging sweeps on an indefinite W)."""
     if options.warmup <= 0:
         return None
-    sweeps = _nsgs(problem, P.copy(), ContactSolverOptions(
-        "nsgs", options.tolerance, options.warmup, options.floor))
+    sweeps = _sweeps(problem, P, options, options.warmup)
     start = residual_norm(problem, P, floor=options.floor)
     return sweeps if sweeps.residual < start else None
 
