@@ -469,6 +469,55 @@ def test_the_newton_matrix_on_the_engaged_rows_is_the_generalized_jacobian(d):
 
 
 @pytest.mark.parametrize("d", [2, 3])
+def test_newton_steps_by_row_updates_of_a_kept_factorization_solve_the_jacobian(d, monkeypatch):
+    """newton_matrix.NewtonMatrix: a sequence of Newton matrices J = I − G + G ρ (W + εI)
+    of one problem whose G changes in a few rows (contacts opening, closing, changing
+    between stick and slip) is solved on one factorization by the Woodbury identity, to
+    round-off against the dense solve; past UPDATE_ROWS changed rows it factorises anew;
+    a singular J_EE gets the least-squares step of the engaged rows."""
+    from scipy import sparse
+
+    from softgrains.contact import newton_matrix
+    from softgrains.contact.newton_matrix import NewtonMatrix
+
+    rng = np.random.default_rng(11)
+    n = 12
+    A = rng.normal(size=(n * d, n * d))
+    blocks = sparse.bsr_matrix(A @ A.T / (n * d) + np.eye(n * d), blocksize=(d, d))
+    rho, shift = rng.uniform(0.5, 2.0, n), 0.1
+
+    def dense(G):
+        return (np.eye(n * d) - sparse.block_diag(list(G)).toarray()
+                + sparse.block_diag(list(G * rho[:, None, None])).toarray()
+                @ (blocks.toarray() + shift * np.eye(n * d)))
+
+    G = np.zeros((n, d, d))
+    G[: n // 2] = np.eye(d)  # half the contacts sticking, the others open
+    solver = NewtonMatrix(blocks, rho, shift)
+    for change in range(6):
+        b = rng.normal(size=n * d)
+        dr = solver.solve(G, b)
+        np.testing.assert_allclose(dense(G) @ dr, b, atol=1e-10 * np.abs(b).max())
+        c = rng.integers(n)  # the next matrix: one contact changes its status
+        G = G.copy()
+        G[c] = [np.eye(d), np.zeros((d, d)), rng.normal(size=(d, d))][change % 3]
+    assert solver.factorizations == 1 and solver.updates == 5
+    monkeypatch.setattr(newton_matrix, "UPDATE_ROWS", d)  # more rows changed: factorised
+    G[: n // 2] = 0.0
+    G[n // 2:] = np.eye(d)
+    b = rng.normal(size=n * d)
+    np.testing.assert_allclose(dense(G) @ solver.solve(G, b), b, atol=1e-10 * np.abs(b).max())
+    assert solver.factorizations == 2
+    # a singular J_EE: two identical contacts (W's rows equal), both sticking
+    twin = sparse.bsr_matrix(np.kron(np.ones((2, 2)), np.eye(d)), blocksize=(d, d))
+    G2 = np.broadcast_to(np.eye(d), (2, d, d)).copy()
+    b = np.r_[np.ones(d), np.ones(d)]
+    dr = NewtonMatrix(twin, np.ones(2)).solve(G2, b)  # consistent: W dr = b
+    assert np.all(np.isfinite(dr))
+    np.testing.assert_allclose(twin.toarray() @ dr, b, atol=1e-6)
+
+
+@pytest.mark.parametrize("d", [2, 3])
 def test_assembled_delassus_is_the_map_from_impulses_to_velocities(d):
     """W (delassus.py, in global axes and in the contact frames) against its definition,
     the columns w(e_j) − w(0) of the problem's own velocity map: three bodies, two contacts

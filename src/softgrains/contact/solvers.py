@@ -10,7 +10,8 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
       λ_n = r_n − ρ w̃_n,   Φ_n = r_n − max(0, λ_n)
       λ_t = r_t − ρ w_t,    Φ_t = r_t − proj_{‖·‖ ≤ μ max(0, λ_n)}(λ_t)
   with w = q + W r: the generalized Jacobian J = (I − G) + G ρ W (G: the derivative of the
-  projections, block-diagonal) is solved with a sparse LU and the step damped by a
+  projections, block-diagonal) is solved with a sparse LU (kept, and updated by rows
+  while G changes in few: newton_matrix.NewtonMatrix) and the step damped by a
   backtracking line search on ½‖Φ‖². Its convergence does not depend on the conditioning
   of W (a free grain between walls at Δt c/h ~ 10³ gives cond(W) ~ 10⁶, where Gauss–Seidel
   needs ~10⁶ sweeps); frictionless problems are solved in a finite number of steps (an
@@ -38,11 +39,10 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from softgrains.contact.gauss_seidel import gauss_seidel
 from softgrains.contact.local_law import OPEN, SLIP, STICK
-from softgrains.contact.newton_matrix import engaged_jacobian
+from softgrains.contact.newton_matrix import NewtonMatrix
 from softgrains.contact.problem import (
     ContactProblem,
     normal_masses,
@@ -293,35 +293,6 @@ def _alart_curnier(r: np.ndarray, u: np.ndarray, bias: np.ndarray, mu: np.ndarra
     return _Linearised(phi, G)
 
 
-def _newton_step(lin: _Linearised, rho: np.ndarray, blocks: sp.bsr_matrix,
-                 shift: float = 0.0) -> np.ndarray:
-    """dr solving J dr = −Φ, J = I − G + G ρ (W + shift I). A row where G vanishes (an open
-    contact's components) is a row of the identity, dr_i = −Φ_i: only the engaged rows E
-    need a factorization, J_EE dr_E = −Φ_E − J_EO dr_O (newton_matrix.py; most contacts
-    of a dense packing are open: with B-splines the LU of the whole J took 77% of a
-    frictional compaction step)."""
-    n, d, _ = lin.G.shape
-    dr = -lin.phi.ravel()
-    engaged = np.flatnonzero(np.any(lin.G.reshape(n * d, d) != 0.0, axis=1))
-    if engaged.size == 0:
-        return dr
-    J_ee, coupling = engaged_jacobian(blocks, lin.G, rho, engaged, dr, shift)
-    rhs = dr[engaged] - coupling
-    try:  # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
-        # (SuperLU's symmetric mode with diagonal pivoting within 0.1 took 3.9 ms against
-        # 4.9 ms on 912 engaged rows of a dense compaction step, but its other round-off
-        # made the quasi-static D10 squeeze's loop stall at step 47: not kept, session 26)
-        step = spla.splu(J_ee.T).solve(rhs, trans="T")
-    except RuntimeError:
-        step = None
-    if step is None or not np.all(np.isfinite(step)):
-        # singular generalized Jacobian (the LU failed or overflowed): a damped
-        # least-squares step
-        step = spla.lsqr(J_ee, rhs, damp=1e-8)[0]
-    dr[engaged] = step
-    return dr
-
-
 @dataclass(frozen=True)
 class _LocalOperator:
     """The problem in its contacts' frames: w = q + W r (flat, (contact, component))."""
@@ -371,6 +342,10 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
         W = (W + shift * sp.identity(n * d, format="csr")).tocsr()
         q = q - shift * proximal.centre
     own_residual = threshold is not None or proximal is not None
+    # one per problem and shift: the Tresca and proximal-point fallbacks' many solves update
+    # the same factorization
+    jacobian = problem._cached(("newton_matrix", shift),
+                               lambda: NewtonMatrix(op.blocks, rho, shift))
     mu, bias = problem.mu, problem.bias
     r = to_local(frames, P).ravel()
     r[np.repeat(~movable, d)] = 0.0
@@ -397,7 +372,8 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
            and iterations < options.max_iterations
            and iterations - progress[1] < STAGNATION_ITERATIONS):
         iterations += 1
-        dr = _newton_step(lin, rho, op.blocks, shift)
+        # J dr = −Φ, J = I − G + G ρ (W + shift I) (newton_matrix.py)
+        dr = jacobian.solve(lin.G, -lin.phi.ravel())
         with np.errstate(over="ignore", invalid="ignore"):
             du = (W @ dr).reshape(n, d)  # w is affine in r: the trials need no product
         step = 1.0
