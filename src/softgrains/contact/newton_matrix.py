@@ -62,6 +62,57 @@ def _engaged_rows(indptr, indices, blocks, G, rho, shift, engaged, position, dr)
     return row_ptr, cols, data, coupling
 
 
+@njit(cache=True)
+def _split_rows(indptr, indices, blocks, G, rho, shift, identity, rows, position):
+    """Rows ``rows`` of identity · I − G + ρ G (W + shift I), as two CSR matrices by their
+    columns j: position[j] ≥ 0 → column position[j] of the first, else column
+    −position[j] − 1 of the second (row i = c d + a as in :func:`_engaged_rows`)."""
+    d = G.shape[1]
+    m = rows.size
+    ptr_in = np.zeros(m + 1, np.int64)
+    ptr_out = np.zeros(m + 1, np.int64)
+    for e in range(m):
+        c = rows[e] // d
+        inside = 0
+        total = 0
+        for k in range(indptr[c], indptr[c + 1]):
+            for q in range(d):
+                total += 1
+                if position[indices[k] * d + q] >= 0:
+                    inside += 1
+        ptr_in[e + 1] = ptr_in[e] + inside
+        ptr_out[e + 1] = ptr_out[e] + total - inside
+    cols_in = np.empty(ptr_in[m], np.int64)
+    data_in = np.empty(ptr_in[m])
+    cols_out = np.empty(ptr_out[m], np.int64)
+    data_out = np.empty(ptr_out[m])
+    g = np.empty(d)
+    for e in range(m):
+        i = rows[e]
+        c, a = i // d, i % d
+        for b in range(d):
+            g[b] = rho[c] * G[c, a, b]
+        at_in, at_out = ptr_in[e], ptr_out[e]
+        for k in range(indptr[c], indptr[c + 1]):
+            c2 = indices[k]
+            for q in range(d):
+                value = 0.0
+                for b in range(d):
+                    value += g[b] * blocks[k, b, q]
+                if c2 == c:
+                    value += g[q] * shift - G[c, a, q] + (identity if a == q else 0.0)
+                j = position[c2 * d + q]
+                if j >= 0:
+                    cols_in[at_in] = j
+                    data_in[at_in] = value
+                    at_in += 1
+                else:
+                    cols_out[at_out] = -j - 1
+                    data_out[at_out] = value
+                    at_out += 1
+    return ptr_in, cols_in, data_in, ptr_out, cols_out, data_out
+
+
 def engaged_jacobian(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, engaged: np.ndarray,
                      dr: np.ndarray, shift: float = 0.0) -> tuple[sp.csr_matrix, np.ndarray]:
     """(J_EE, J_EO dr_O) of J = I − G + G ρ (W + shift I): W as d × d block rows (BSR),
@@ -91,14 +142,16 @@ UPDATE_ROWS = 80
 UPDATE_RESIDUAL = 1e-9
 
 
-def _full_rows(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float,
-               rows: np.ndarray) -> sp.csr_matrix:
-    """Rows ``rows`` of J = I − G + G ρ (W + shift I) over all columns (CSR)."""
-    size = G.shape[0] * G.shape[1]
-    row_ptr, cols, data, _ = _engaged_rows(
-        W.indptr, W.indices, W.data, G, rho, float(shift), rows,
-        np.arange(size, dtype=np.int64), np.zeros(size))
-    return sp.csr_matrix((data, cols, row_ptr), shape=(rows.size, size))
+def _rows(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float, identity: float,
+          rows: np.ndarray, position: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """Rows ``rows`` of identity · I − G + G ρ (W + shift I) split by ``position`` into
+    two CSR matrices (:func:`_split_rows`)."""
+    ptr_in, cols_in, data_in, ptr_out, cols_out, data_out = _split_rows(
+        W.indptr, W.indices, W.data, G, rho, float(shift), float(identity), rows, position)
+    inside = int(np.count_nonzero(position >= 0))
+    return (sp.csr_matrix((data_in, cols_in, ptr_in), shape=(rows.size, inside)),
+            sp.csr_matrix((data_out, cols_out, ptr_out),
+                          shape=(rows.size, position.size - inside)))
 
 
 class _Factorization:
@@ -113,9 +166,10 @@ class _Factorization:
         outside = np.ones(n * d, bool)
         outside[self.engaged] = False
         self.outside = np.flatnonzero(outside)
-        self.rows = _full_rows(W, G, rho, shift, self.engaged)  # J0's engaged rows
-        self.J_eo = self.rows[:, self.outside]
-        self.J_ee, _ = engaged_jacobian(W, G, rho, self.engaged, np.zeros(n * d), shift)
+        position = np.empty(n * d, np.int64)
+        position[self.engaged] = np.arange(self.engaged.size)
+        position[self.outside] = -1 - np.arange(self.outside.size)
+        self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, position)
         # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
         # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
         # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26). Raises
@@ -135,7 +189,7 @@ class _Factorization:
         """J0 x."""
         y = x.copy()
         if self.engaged.size:
-            y[self.engaged] = self.rows @ x
+            y[self.engaged] = self.J_ee @ x[self.engaged] + self.J_eo @ x[self.outside]
         return y
 
     def columns(self, rows: np.ndarray) -> np.ndarray:
@@ -194,8 +248,9 @@ class NewtonMatrix:
             return base.solve(b)
         if changed.size > UPDATE_ROWS:
             return None
-        D = (_full_rows(self.W, G, self.rho, self.shift, changed)
-             - _full_rows(self.W, base.G, self.rho, self.shift, changed)).tocsr()
+        # J is affine in G: the changed rows' differences are those of −ΔG + ρ ΔG (W + shift I)
+        D, _ = _rows(self.W, G - base.G, self.rho, self.shift, 0.0, changed,
+                     np.arange(n * d, dtype=np.int64))
         Z = base.columns(changed)
         y = base.solve(b)
         with np.errstate(over="ignore", invalid="ignore"):
