@@ -287,6 +287,28 @@ def test_the_coupling_loop_gives_up_on_a_cycle_but_not_on_slow_progress():
     assert not restarted.stalled(5.0)
 
 
+def test_the_coupling_loop_gives_up_at_once_on_an_iterate_that_repeats():
+    """Progress (coupling.py): residuals (the contacts' and each body's over their
+    tolerances) that repeat unchanged STUCK_REPEATS times mean an iteration at a fixed
+    point that is no solution (session 27: a contact solve stopped at 1.09 × the loop's
+    tolerance with every fallback spent and the bodies converged, the same iterate 42
+    times before the 40-iteration stall test gave up); residuals that still move, however
+    little beyond round-off, do not stall it, nor repeats interrupted by a restart."""
+    from softgrains.contact.coupling import STUCK_REPEATS, Progress
+
+    stuck = Progress()
+    residuals = [[40.0, 3.0], [5.0, 2.0]] + [[1.09, 0.2]] * 10
+    stalled_at = next(k for k, r in enumerate(residuals) if stuck.stalled(max(r), r))
+    assert stalled_at == 2 + STUCK_REPEATS - 1 and stuck.stuck
+    moving = Progress()  # the contacts' residual the same, a body's still converging
+    assert not any(moving.stalled(1.09, [1.09, 0.2 * 0.999 ** k]) for k in range(30))
+    restarted = Progress()
+    for r in [[1.09, 0.2]] * (STUCK_REPEATS - 1):
+        assert not restarted.stalled(max(r), r)
+    restarted.restart()  # corrected gaps, a new tangent: the repeats are forgotten
+    assert not restarted.stalled(1.09, [1.09, 0.2])
+
+
 def _kicked_disk(adaptive: bool) -> tuple[Simulation, np.ndarray, float]:
     """``_thrown_disk`` at rest, its front point 0.9 h from the slab's face (the edge of
     its cell, h/4 ahead, 0.65 h), for one step (its points then move 0: the next step's

@@ -92,6 +92,13 @@ INDEFINITE_NEWTON_ITERATIONS = 20
 STALL_ITERATIONS = 40
 STALL_DECREASE = 0.9
 STALL_DESCENT = 5
+# ... and at once when its residuals (contacts' and bodies') repeat unchanged, to
+# STUCK_RESOLUTION relative, STUCK_REPEATS times: the iteration is at a fixed point that
+# is no solution (session 27: a frictional pre-compaction step whose contact solve stopped
+# at 1.09 × the loop's tolerance, every fallback spent, the bodies converged: the same
+# iterate 42 times, 0.3 s each, before the stall test gave up)
+STUCK_REPEATS = 3
+STUCK_RESOLUTION = 1e-9
 # the end-of-step gap check (end_gaps.py): a point contact whose true end gap would pass
 # below its floor, min(its start gap, −GAP_OVERLAP h), by GAP_ERROR h or more has its
 # constraint corrected by the difference and the step solved again (a fixed point on the
@@ -165,9 +172,20 @@ class Progress:
     best: float = math.inf
     since: int = 0
     recent: list[float] = field(default_factory=list)
+    residuals: list[np.ndarray] = field(default_factory=list)  # the last STUCK_REPEATS
+    stuck: bool = False  # stalled because the residuals repeated unchanged
 
-    def stalled(self, measure: float) -> bool:
-        """Record this iteration's measure; True when the loop has stalled."""
+    def stalled(self, measure: float, residuals: np.ndarray | None = None) -> bool:
+        """Record this iteration's measure (and the ``residuals`` it is the largest of);
+        True when the loop has stalled: no progress (see the class), or the same
+        residuals STUCK_REPEATS times in a row."""
+        if residuals is not None:
+            self.residuals = (self.residuals + [np.asarray(residuals, float)])[-STUCK_REPEATS:]
+            self.stuck = len(self.residuals) == STUCK_REPEATS and all(
+                np.allclose(r, self.residuals[0], rtol=STUCK_RESOLUTION, atol=0.0)
+                for r in self.residuals[1:])
+            if self.stuck:
+                return True
         self.recent = (self.recent + [measure])[-STALL_DESCENT:]
         if measure < STALL_DECREASE * self.best:
             self.best, self.since = measure, 0
@@ -180,7 +198,7 @@ class Progress:
 
     def restart(self) -> None:
         """Forget the best (the iteration changed: a new tangent, corrected gaps)."""
-        self.best, self.since, self.recent = math.inf, 0, []
+        self.best, self.since, self.recent, self.residuals = math.inf, 0, [], []
 
 
 @dataclass
@@ -426,10 +444,12 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             bias = (held + end_gap_offset) / (theta * dt)
             diag.gap_updates += 1
             progress.restart()
-        elif progress.stalled(max([diag.residual / settings.tolerance] + [
-                b.residual_ratio(p_scale * b.impulse_weight) for b in steps.values()])):
-            diag.stalled = True
-            break
+        else:
+            ratios = [diag.residual / settings.tolerance] + [
+                b.residual_ratio(p_scale * b.impulse_weight) for b in steps.values()]
+            if progress.stalled(max(ratios), np.array(ratios)):
+                diag.stalled = True
+                break
     if not finished:
         diag.converged = False
         if short_gap is not None:  # where the end-of-step gap did not settle
@@ -454,8 +474,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             bodies_left = [steps[i].stepper.name for i, ok in done.items() if not ok]
             diag.message = (
                 f"step {step}: the contact loop "
-                + (f"stalled after {diag.iterations} iterations, no progress in the last "
-                   f"{STALL_ITERATIONS}" if diag.stalled else
+                + ((f"stalled after {diag.iterations} iterations, its residuals unchanged in "
+                    f"the last {STUCK_REPEATS}" if progress.stuck else
+                    f"stalled after {diag.iterations} iterations, no progress in the last "
+                    f"{STALL_ITERATIONS}") if diag.stalled else
                    f"did not converge in {settings.max_iterations} iterations")
                 + f" (complementarity residual {diag.residual:.2e} of the largest "
                 f"impulse, tolerance {settings.tolerance:g}; {settings.relation} relation, "
