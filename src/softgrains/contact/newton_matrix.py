@@ -4,8 +4,8 @@
 
 A row where G vanishes (an open contact's components) is a row of the identity, so the
 Newton step needs only the engaged rows E: J_EE dr_E = −Φ_E − J_EO dr_O. Block row c of
-G ρ W is ρ_c G_c W_c,: : a Numba kernel builds J_EE from W's d × d block rows (delassus.py)
-as CSR and J_EO dr_O on the way (the sparse products, the slicing and the CSR → CSC
+G ρ W is ρ_c G_c W_c,: : a Numba kernel builds J_EE and J_EO from W's d × d block rows
+(delassus.py) as CSR in one pass (the sparse products, the slicing and the CSR → CSC
 conversion took ~25% of a Newton iteration on 1600 contacts of a dense compaction).
 :class:`NewtonMatrix` solves the Newton steps of one problem on a kept factorization,
 updated by rows (the Woodbury identity) while G changes in few rows.
@@ -20,53 +20,11 @@ from numba import njit
 
 
 @njit(cache=True)
-def _engaged_rows(indptr, indices, blocks, G, rho, shift, engaged, position, dr):
-    """CSR arrays of J_EE and the vector J_EO dr_O (position[j]: j's index in E or −1):
-    row i = c d + a is e_i − G_c,a + ρ_c G_c,a (W_c,: + shift e_c,:)."""
-    d = G.shape[1]
-    m = engaged.size
-    row_ptr = np.zeros(m + 1, np.int64)
-    for e in range(m):
-        c = engaged[e] // d
-        count = 0
-        for k in range(indptr[c], indptr[c + 1]):
-            for q in range(d):
-                if position[indices[k] * d + q] >= 0:
-                    count += 1
-        row_ptr[e + 1] = row_ptr[e] + count
-    cols = np.empty(row_ptr[m], np.int64)
-    data = np.empty(row_ptr[m])
-    coupling = np.zeros(m)
-    g = np.empty(d)
-    for e in range(m):
-        i = engaged[e]
-        c, a = i // d, i % d
-        for b in range(d):
-            g[b] = rho[c] * G[c, a, b]
-        at = row_ptr[e]
-        for k in range(indptr[c], indptr[c + 1]):
-            c2 = indices[k]
-            for q in range(d):
-                value = 0.0
-                for b in range(d):
-                    value += g[b] * blocks[k, b, q]
-                if c2 == c:
-                    value += g[q] * shift - G[c, a, q] + (1.0 if a == q else 0.0)
-                j = c2 * d + q
-                if position[j] >= 0:
-                    cols[at] = position[j]
-                    data[at] = value
-                    at += 1
-                else:
-                    coupling[e] += value * dr[j]
-    return row_ptr, cols, data, coupling
-
-
-@njit(cache=True)
 def _split_rows(indptr, indices, blocks, G, rho, shift, identity, rows, position):
     """Rows ``rows`` of identity · I − G + ρ G (W + shift I), as two CSR matrices by their
     columns j: position[j] ≥ 0 → column position[j] of the first, else column
-    −position[j] − 1 of the second (row i = c d + a as in :func:`_engaged_rows`)."""
+    −position[j] − 1 of the second; row i = c d + a is
+    identity · e_i − G_c,a + ρ_c G_c,a (W_c,: + shift e_c,:)."""
     d = G.shape[1]
     m = rows.size
     ptr_in = np.zeros(m + 1, np.int64)
@@ -113,6 +71,30 @@ def _split_rows(indptr, indices, blocks, G, rho, shift, identity, rows, position
     return ptr_in, cols_in, data_in, ptr_out, cols_out, data_out
 
 
+def _rows(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float, identity: float,
+          rows: np.ndarray, position: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
+    """Rows ``rows`` of identity · I − G + G ρ (W + shift I) split by ``position`` into
+    two CSR matrices (:func:`_split_rows`)."""
+    ptr_in, cols_in, data_in, ptr_out, cols_out, data_out = _split_rows(
+        W.indptr, W.indices, W.data, G, rho, float(shift), float(identity), rows, position)
+    inside = int(np.count_nonzero(position >= 0))
+    return (sp.csr_matrix((data_in, cols_in, ptr_in), shape=(rows.size, inside)),
+            sp.csr_matrix((data_out, cols_out, ptr_out),
+                          shape=(rows.size, position.size - inside)))
+
+
+def _positions(engaged: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rows outside E, and each column's position for :func:`_split_rows`: its index in
+    E, or −1 − its index among the others."""
+    outside = np.ones(size, bool)
+    outside[engaged] = False
+    outside = np.flatnonzero(outside)
+    position = np.empty(size, np.int64)
+    position[engaged] = np.arange(engaged.size)
+    position[outside] = -1 - np.arange(outside.size)
+    return outside, position
+
+
 def engaged_jacobian(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, engaged: np.ndarray,
                      dr: np.ndarray, shift: float = 0.0) -> tuple[sp.csr_matrix, np.ndarray]:
     """(J_EE, J_EO dr_O) of J = I − G + G ρ (W + shift I): W as d × d block rows (BSR),
@@ -120,12 +102,9 @@ def engaged_jacobian(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, engaged: 
     rows (only dr_O is read). An engaged contact's block row must hold its diagonal block
     (the I − G terms are added there): engaged rows are movable (G vanishes where
     W_cc,nn = 0), and a contact touching a body is in its own block row (delassus.py)."""
-    n, d = G.shape[0], G.shape[1]
-    position = -np.ones(n * d, np.int64)
-    position[engaged] = np.arange(engaged.size)
-    row_ptr, cols, data, coupling = _engaged_rows(  # W's own index arrays (int32 or 64)
-        W.indptr, W.indices, W.data, G, rho, float(shift), engaged, position, dr)
-    return sp.csr_matrix((data, cols, row_ptr), shape=(engaged.size, engaged.size)), coupling
+    outside, position = _positions(engaged, dr.size)
+    J_ee, J_eo = _rows(W, G, rho, shift, 1.0, engaged, position)
+    return J_ee, J_eo @ dr[outside]
 
 
 # Row updates of a kept factorization (session 27): between two Newton iterations of one
@@ -142,18 +121,6 @@ UPDATE_ROWS = 80
 UPDATE_RESIDUAL = 1e-9
 
 
-def _rows(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float, identity: float,
-          rows: np.ndarray, position: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
-    """Rows ``rows`` of identity · I − G + G ρ (W + shift I) split by ``position`` into
-    two CSR matrices (:func:`_split_rows`)."""
-    ptr_in, cols_in, data_in, ptr_out, cols_out, data_out = _split_rows(
-        W.indptr, W.indices, W.data, G, rho, float(shift), float(identity), rows, position)
-    inside = int(np.count_nonzero(position >= 0))
-    return (sp.csr_matrix((data_in, cols_in, ptr_in), shape=(rows.size, inside)),
-            sp.csr_matrix((data_out, cols_out, ptr_out),
-                          shape=(rows.size, position.size - inside)))
-
-
 class _Factorization:
     """J0 = I − G0 + G0 ρ (W + shift I) factorised on its engaged rows E:
     x_O = b_O, J_EE x_E = b_E − J_EO b_O; and its solves for unit vectors, kept."""
@@ -163,12 +130,7 @@ class _Factorization:
         self.G = G.copy()
         flat = G.reshape(n * d, d)
         self.engaged = np.flatnonzero(np.any(flat != 0.0, axis=1))
-        outside = np.ones(n * d, bool)
-        outside[self.engaged] = False
-        self.outside = np.flatnonzero(outside)
-        position = np.empty(n * d, np.int64)
-        position[self.engaged] = np.arange(self.engaged.size)
-        position[self.outside] = -1 - np.arange(self.outside.size)
+        self.outside, position = _positions(self.engaged, n * d)
         self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, position)
         # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
         # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
