@@ -522,16 +522,26 @@ def test_newton_steps_by_row_updates_of_a_kept_factorization_solve_the_jacobian(
         b = rng.normal(size=n * d)
         dr = solver.solve(G, b)
         np.testing.assert_allclose(dense(G) @ dr, b, atol=1e-10 * np.abs(b).max())
-        c = rng.integers(n)  # the next matrix: one contact changes its status
+        c = change  # the next matrix: one contact changes its status (open, stick, slip)
         G = G.copy()
-        G[c] = [np.eye(d), np.zeros((d, d)), rng.normal(size=(d, d))][change % 3]
+        G[c] = [np.zeros((d, d)), np.eye(d), rng.normal(size=(d, d))][change % 3]
+        if change % 3 == 1 and c < n // 2:
+            G[c] = rng.normal(size=(d, d))
     assert solver.factorizations == 1 and solver.updates == 5
+    # an update whose residual check fails is replaced by a factorization
+    monkeypatch.setattr(newton_matrix, "UPDATE_RESIDUAL", 0.0)
+    G = G.copy()
+    G[n - 1] = np.eye(d)
+    b = rng.normal(size=n * d)
+    np.testing.assert_allclose(dense(G) @ solver.solve(G, b), b, atol=1e-10 * np.abs(b).max())
+    assert solver.factorizations == 2 and solver.updates == 5
+    monkeypatch.setattr(newton_matrix, "UPDATE_RESIDUAL", 1e-9)
     monkeypatch.setattr(newton_matrix, "UPDATE_ROWS", d)  # more rows changed: factorised
     G[: n // 2] = 0.0
     G[n // 2:] = np.eye(d)
     b = rng.normal(size=n * d)
     np.testing.assert_allclose(dense(G) @ solver.solve(G, b), b, atol=1e-10 * np.abs(b).max())
-    assert solver.factorizations == 2
+    assert solver.factorizations == 3
     # a singular J_EE: two identical contacts (W's rows equal), both sticking
     twin = sparse.bsr_matrix(np.kron(np.ones((2, 2)), np.eye(d)), blocksize=(d, d))
     G2 = np.broadcast_to(np.eye(d), (2, d, d)).copy()

@@ -119,6 +119,9 @@ UPDATE_ROWS = 80
 # an updated solve is kept when its residual ‖J x − b‖ is within this fraction of ‖b‖,
 # else J is factorised anew (the capacitance matrix of nearly dependent rows)
 UPDATE_RESIDUAL = 1e-9
+# the kept solves J0⁻¹ e_r (N floats each) of one factorization: at most this many, then J
+# is factorised anew
+KEPT_SOLVES = 4 * UPDATE_ROWS
 
 
 class _Factorization:
@@ -207,8 +210,9 @@ class NewtonMatrix:
         base, (n, d) = self.base, G.shape[:2]
         changed = np.flatnonzero(np.any((G != base.G).reshape(n * d, d), axis=1))
         if changed.size == 0:
-            return base.solve(b)
-        if changed.size > UPDATE_ROWS:
+            dr = base.solve(b)
+            return dr if np.all(np.isfinite(dr)) else None
+        if changed.size > UPDATE_ROWS or len(base.unit_solves) + changed.size > KEPT_SOLVES:
             return None
         # J is affine in G: the changed rows' differences are those of −ΔG + ρ ΔG (W + shift I)
         D, _ = _rows(self.W, G - base.G, self.rho, self.shift, 0.0, changed,

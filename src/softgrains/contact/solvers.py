@@ -82,8 +82,9 @@ FALLBACK_NEWTON_BUDGET = 200
 # ~1e-2, from where the Newton meets the solve's tolerance in 2-15 iterations
 WARMUP_SWEEPS = 20
 SWEEP_CHUNK = 10  # Gauss–Seidel sweeps between two evaluations of the residual
-# the fallback's sweeps stop early after FALLBACK_PATIENCE evaluations none of which lowered
-# the best residual below FALLBACK_PROGRESS × it, and return their best iterate (session 27:
+# the last fallback's sweeps (with friction) stop early after FALLBACK_PATIENCE evaluations
+# none of which made progress (a residual below FALLBACK_PROGRESS × the last one that did),
+# and return their best iterate (session 27:
 # a dense frictional step near 245 σ0, 1867 contacts, two solves whose proximal point
 # stopped at 7.2e-5 / 7.8e-5: their 500 sweeps from there, 0.5 s each, ended at 1.3e-4 /
 # 1.2e-4)
@@ -190,9 +191,10 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
             return best
         return _better(best, _proximal_point(problem, P, options, budget))
 
-    def sweeps(best: ContactResult) -> ContactResult:
+    def sweeps(best: ContactResult) -> ContactResult:  # (the last stage with friction:
+        # patient; without, where they come first, as they were: not measured)
         return _better(best, _sweeps(problem, best.impulse, options, NSGS_FALLBACK_SWEEPS,
-                                     _Patience()))
+                                     _Patience() if frictional else None))
 
     for stage in (proximal, sweeps) if frictional else (sweeps, proximal):
         result = stage(result)
@@ -212,7 +214,7 @@ def _sweeps(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
 @dataclass(frozen=True)
 class _Patience:
     """Sweeps stop after ``evaluations`` residual evaluations in a row none of which is
-    below ``progress`` × the best residual so far."""
+    below ``progress`` × the residual of the last one that was (at first: the start's)."""
 
     evaluations: int = FALLBACK_PATIENCE
     progress: float = FALLBACK_PROGRESS
@@ -258,7 +260,7 @@ def _nsgs(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
     history = []
     sweeps = 0
     residual = residual_norm(problem, P, floor=options.floor)
-    best, best_P, idle = residual, P.copy(), 0
+    best, best_P, anchor, idle = residual, P.copy(), residual, 0
     while sweeps < options.max_iterations and residual > options.tolerance:
         n, _ = gauss_seidel(problem.a_slot, problem.a_col, problem.b_slot, problem.b_col,
                             problem.wall_va, problem.wall_vb, problem.normal, problem.bias,
@@ -274,7 +276,10 @@ def _nsgs(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
             break
         if patience is None:
             continue
-        idle = 0 if residual < patience.progress * best else idle + 1
+        if residual < patience.progress * anchor:  # progress: 5% below the last anchor
+            anchor, idle = residual, 0
+        else:
+            idle += 1
         if residual < best:
             best, best_P = residual, P.copy()
         if idle >= patience.evaluations:
