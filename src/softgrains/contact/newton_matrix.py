@@ -83,6 +83,13 @@ def _rows(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float, identi
                           shape=(rows.size, position.size - inside)))
 
 
+def _engaged(G: np.ndarray) -> np.ndarray:
+    """Whether each row of J (contact, component) is engaged: G's row is not zero (else
+    it is a row of the identity)."""
+    n, d = G.shape[0], G.shape[1]
+    return np.any(G.reshape(n * d, d) != 0.0, axis=1)
+
+
 def _positions(engaged: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     """The rows outside E, and each column's position for :func:`_split_rows`: its index in
     E, or −1 − its index among the others."""
@@ -129,11 +136,9 @@ class _Factorization:
     x_O = b_O, J_EE x_E = b_E − J_EO b_O; and its solves for unit vectors, kept."""
 
     def __init__(self, W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float):
-        n, d = G.shape[0], G.shape[1]
         self.G = G.copy()
-        flat = G.reshape(n * d, d)
-        self.engaged = np.flatnonzero(np.any(flat != 0.0, axis=1))
-        self.outside, position = _positions(self.engaged, n * d)
+        self.engaged = np.flatnonzero(_engaged(G))
+        self.outside, position = _positions(self.engaged, G.shape[0] * G.shape[1])
         self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, position)
         # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
         # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
@@ -230,13 +235,12 @@ class NewtonMatrix:
                 return None  # (also where not finite)
         # a row of the identity (G_i = 0: an open contact's component) exactly, as a
         # factorization gives it (an impulse opened by the step is then exactly 0)
-        identity = ~np.any(G.reshape(n * d, d) != 0.0, axis=1)
+        identity = ~_engaged(G)
         dr[identity] = b[identity]
         return dr
 
     def _least_squares(self, G: np.ndarray, b: np.ndarray) -> np.ndarray:
-        n, d = G.shape[:2]
-        engaged = np.flatnonzero(np.any(G.reshape(n * d, d) != 0.0, axis=1))
+        engaged = np.flatnonzero(_engaged(G))
         dr = b.copy()
         J_ee, coupling = engaged_jacobian(self.W, G, self.rho, engaged, dr, self.shift)
         dr[engaged] = spla.lsqr(J_ee, dr[engaged] - coupling, damp=1e-8)[0]

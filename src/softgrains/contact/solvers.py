@@ -260,7 +260,7 @@ def _nsgs(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
     history = []
     sweeps = 0
     residual = residual_norm(problem, P, floor=options.floor)
-    best, best_P, anchor, idle = residual, P.copy(), residual, 0
+    best, best_P, anchor, idle = residual, P.copy() if patience else None, residual, 0
     while sweeps < options.max_iterations and residual > options.tolerance:
         n, _ = gauss_seidel(problem.a_slot, problem.a_col, problem.b_slot, problem.b_col,
                             problem.wall_va, problem.wall_vb, problem.normal, problem.bias,
