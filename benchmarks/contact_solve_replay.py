@@ -1,0 +1,54 @@
+"""Replay saved contact problems (ContactProblem.save, .npz; e.g. tests/contact/data/ or
+the problems a run saves for its unconverged steps) through the default solver and print,
+per problem: contacts, seconds (best of --repeat), Newton iterations, residual, and how the
+Newton matrices were solved (newton_matrix.NewtonMatrix: factorizations against row
+updates of a kept factorization). Compare code versions by running it from each checkout
+on the same files, one after the other, 1 thread (issue 11, session 27).
+
+Run:  python benchmarks/contact_solve_replay.py FILE.npz ... [--tolerance 1e-6] [--repeat 3]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from softgrains.contact.problem import ContactProblem
+from softgrains.contact.solvers import ContactSolverOptions, solve
+
+
+def replay(path: Path, tolerance: float, repeat: int) -> str:
+    """One table row: the best time of ``repeat`` solves from the saved warm start (or 0)."""
+    with np.load(path) as data:
+        start = data["warm_start"] if "warm_start" in data else None
+    best = np.inf
+    for _ in range(repeat):
+        problem = ContactProblem.load(path)  # a fresh problem: nothing cached
+        began = time.perf_counter()
+        result = solve(problem, start, ContactSolverOptions(tolerance=tolerance))
+        best = min(best, time.perf_counter() - began)
+    matrices = [v for k, v in problem._cache.items() if isinstance(k, tuple)]
+    factorizations = sum(getattr(m, "factorizations", 0) for m in matrices)
+    updates = sum(getattr(m, "updates", 0) for m in matrices)
+    return (f"| {path.name} | {problem.n_contacts} | {best:.3f} | {result.iterations} | "
+            f"{result.residual:.1e} | {factorizations} | {updates} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("files", type=Path, nargs="+")
+    parser.add_argument("--tolerance", type=float, default=1e-6)
+    parser.add_argument("--repeat", type=int, default=3)
+    args = parser.parse_args()
+    print("| problem | contacts | s (best) | iterations | residual | factorizations | "
+          "row updates |")
+    print("| --- | --- | --- | --- | --- | --- | --- |")
+    for path in args.files:
+        print(replay(path, args.tolerance, args.repeat), flush=True)
+
+
+if __name__ == "__main__":
+    main()
