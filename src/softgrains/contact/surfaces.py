@@ -43,6 +43,7 @@ step below its prediction at an impact (session 11, docs/dev-notes.md).
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from itertools import chain
 
 import numpy as np
 from numba import njit
@@ -210,9 +211,9 @@ def calibrated_distance(value: np.ndarray, grad: np.ndarray, radius: float
 def _neighbours(tree, x: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
     """Points of a body within ``radius`` of each x, in CSR form."""
     found = tree.query_ball_point(x, radius, return_sorted=False)
-    counts = np.fromiter((len(f) for f in found), np.int64, count=len(found))
+    counts = np.fromiter(map(len, found), np.int64, count=len(found))
     ptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
-    flat = np.fromiter((i for f in found for i in f), np.int64, count=int(ptr[-1]))
+    flat = np.fromiter(chain.from_iterable(found), np.int64, count=int(ptr[-1]))
     return ptr, flat
 
 
@@ -224,6 +225,15 @@ class KernelSurface:
         self.step = step
         self.radius = KERNEL_RADIUS * step.stepper.lattice.h
         self.tree = cKDTree(step.pts.x)
+        self._own_distance = None
+
+    def own_distance(self) -> np.ndarray:
+        """The calibrated distance of each of the body's own points to its surface (< 0
+        inside), computed once a step for all its passes."""
+        if self._own_distance is None:
+            value, grad, _ = self.field(self.step.pts.x)
+            self._own_distance, _ = calibrated_distance(value, grad, self.radius)
+        return self._own_distance
 
     def field(self, x: np.ndarray):
         """c and ∇c at x, and the neighbour lists (CSR) they were summed over."""
@@ -352,9 +362,7 @@ def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float):
     lo, hi = T.step.pts.x.min(axis=0), T.step.pts.x.max(axis=0)
     margin = reach + T.radius
     near_box = np.flatnonzero(np.all((x > lo - margin) & (x < hi + margin), axis=1))
-    value, grad, _ = O.field(x[near_box])
-    own_distance, _ = calibrated_distance(value, grad, O.radius)
-    candidates = near_box[own_distance > -spacing]  # the outer layer of own's points
+    candidates = near_box[O.own_distance()[near_box] > -spacing]  # own's outer layer
     xc = x[candidates]
     c, grad, near = T.field(xc)
     length = np.linalg.norm(grad, axis=1)
