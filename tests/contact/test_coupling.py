@@ -179,25 +179,46 @@ def test_a_body_with_an_indefinite_compliance_switches_to_the_projected_tangent(
     steps = {3: indefinite, 5: singular}
     slots = SimpleNamespace(bodies=[3, 5], W=[None, None], response=[None, None],
                             rows=[None, None], semidefinite=[False, False],
-                            compliance=lambda slot, W: W)
-    du = {3: np.ones(1), 5: np.ones(1)}
-    assert not _update_compliances(steps, slots, du, delassus=True)
+                            impulse_basis=[None, None], compliance=lambda slot, W: W)
+    fresh = {3, 5}
+    assert not _update_compliances(steps, slots, fresh, delassus=True)
     assert slots.semidefinite == [False, True]
     assert _switch_indefinite(steps, slots) == [3]
     assert indefinite.projected and not singular.projected and slots.W[0] is None
-    assert _update_compliances(steps, slots, du, delassus=True)  # every W_s now PSD
+    assert _update_compliances(steps, slots, set(), delassus=True)  # every W_s now PSD
     np.testing.assert_array_equal(slots.W[0], np.eye(2))
     np.testing.assert_array_equal(slots.W[1], singular.exact)
     stuck = _Body([[1.0, 2.0], [2.0, 1.0]])
     stuck.use_projected_tangent = lambda: False  # tangent = "exact"
     slots.W, slots.semidefinite = [None, None], [False, False]
-    assert not _update_compliances({3: stuck, 5: singular}, slots, du, delassus=True)
+    assert not _update_compliances({3: stuck, 5: singular}, slots, fresh, delassus=True)
     assert _switch_indefinite({3: stuck, 5: singular}, slots) == []
     assert not stuck.projected
     # round-off below a PSD matrix's zero eigenvalue is not indefiniteness
     rotation = np.array([[0.6, 0.8], [-0.8, 0.6]])
     assert _semidefinite(rotation @ np.diag([1.0, -1e-13]) @ rotation.T)
     assert not _semidefinite(rotation @ np.diag([1.0, -1e-6]) @ rotation.T)
+
+
+def test_a_frictionless_contact_s_tangential_compliance_is_no_part_of_the_check():
+    """The definiteness check sees W_s on the impulses the body's contacts can carry
+    (coupling._impulse_basis): every component at a column with a frictional contact, the
+    normal alone at a frictionless one. A W_s negative only along a frictionless contact's
+    tangent is semidefinite there; the same W_s with friction on that contact is not."""
+    from types import SimpleNamespace
+
+    from softgrains.contact.coupling import _impulse_basis, _semidefinite
+
+    slots = SimpleNamespace(d=2, k_size=np.array([2]), a_slot=np.array([0, -1]),
+                            a_col=np.array([0, 0]), b_slot=np.array([-1, 0]),
+                            b_col=np.array([0, 1]))
+    normal = np.array([[1.0, 0.0], [0.6, 0.8]])
+    tangent = np.array([0.0, 0.0, -0.8, 0.6])  # column 1's tangent
+    W = np.eye(4) - 2.0 * np.outer(tangent, tangent)
+    basis = _impulse_basis(slots, 0, normal, np.array([0.5, 0.0]))
+    np.testing.assert_array_equal(basis, [[1, 0, 0], [0, 1, 0], [0, 0, 0.6], [0, 0, 0.8]])
+    assert _semidefinite(W, basis) and not _semidefinite(W)
+    assert _impulse_basis(slots, 0, normal, np.array([0.5, 0.5])) is None
 
 
 def _thrown_disk(max_step_motion: float, speed: float = 15.0, gravity: float = 0.0,

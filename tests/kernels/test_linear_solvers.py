@@ -1,13 +1,19 @@
 """The bodies' Newton solves (integrator/linear_solvers.py): the dense LU used for small
 bodies gives what SuperLU gives, for one right-hand side and for many (the contact
-compliance [A⁻¹]_cc), and fails the way SuperLU does on a singular matrix."""
+compliance [A⁻¹]_cc), and fails the way SuperLU does on a singular matrix; the Newton
+matrix with its negative modes mirrored."""
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
 from softgrains.integrator import linear_solvers
-from softgrains.integrator.linear_solvers import DenseLU, LinearSolver, factorize
+from softgrains.integrator.linear_solvers import (
+    DenseLU,
+    LinearSolver,
+    factorize,
+    mirrored_negative_modes,
+)
 
 
 def _stiffness_like(n, seed=0):
@@ -45,3 +51,23 @@ def test_a_singular_matrix_fails_like_superlu():
     A = sp.csr_matrix(A)
     with pytest.raises(RuntimeError):
         DenseLU(A)
+
+
+def test_mirrored_negative_modes_flip_only_the_negative_eigenvalues():
+    """A⁺ = A + Σ_{λ<0} 2|λ| M v vᵀ M for A v = λ M v: a symmetric A with two negative
+    generalised eigenvalues (built from chosen eigenpairs) gets them as |λ| and keeps every
+    other eigenpair exactly (A⁺ v = A v there); a positive definite A gives None."""
+    rng = np.random.default_rng(3)
+    n = 12
+    m = rng.uniform(0.5, 3.0, n)
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    lam = np.r_[-4.0, -0.5, rng.uniform(0.1, 50.0, n - 2)]
+    root = np.sqrt(m)
+    A = (Q * lam) @ Q.T * root[:, None] * root[None, :]  # M^½ Q Λ Qᵀ M^½
+    V = Q / root[:, None]  # A v = λ M v, vᵀ M v = 1
+    mirrored = mirrored_negative_modes(sp.csr_matrix(A), m)
+    np.testing.assert_allclose(mirrored @ V, (V * np.abs(lam)) * m[:, None], atol=1e-9)
+    np.testing.assert_allclose(mirrored @ V[:, 2:], A @ V[:, 2:], atol=1e-9)
+    np.linalg.cholesky(0.5 * (mirrored + mirrored.T))  # positive definite
+    positive = (Q * np.abs(lam)) @ Q.T * root[:, None] * root[None, :]
+    assert mirrored_negative_modes(sp.csr_matrix(positive), m) is None

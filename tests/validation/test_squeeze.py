@@ -123,3 +123,40 @@ def test_frictionless_contacts_never_put_energy_in_with_the_default_theta(wall_s
                       - previous["contact_dissipation"] - previous["gap_correction_work"])
         assert dissipated >= -1e-9 * abs(step_work), (sim.state.step, dissipated, step_work)
         previous = row
+
+
+def test_a_frictional_squeeze_mirrors_the_negative_modes_and_keeps_its_solution(monkeypatch):
+    """tangent = "auto" (ALGORITHM.md §7 deviation, docs/dev-notes.md): the quasi-static
+    squeeze (D/h 10, Δt c/h 3000) with plates of μ = 0.5 makes the disk's exact tangent
+    indefinite on its contacts' impulses (W_s not PSD) at every step; the disk's Newton
+    matrix then has its negative modes mirrored (BodyStep.mirror_negative_modes) instead of
+    a failed contact solve and the projected tangent. Only the Newton matrix changes: the
+    plate force at every step is the one of the run without it, to the loop's tolerance
+    (1e-4; measured 2e-5)."""
+    from softgrains.integrator.implicit import BodyStep
+
+    bench = _benchmark()
+    mirror = BodyStep.mirror_negative_modes
+
+    def run(enabled):
+        used = []
+
+        def spy(step):
+            used.append(mirror(step) if enabled else False)
+            return used[-1]
+
+        monkeypatch.setattr(BodyStep, "mirror_negative_modes", spy)
+        sim = Simulation(load_case(bench.squeeze_case(10, 3000.0, 0.1, overrides={
+            "contact.friction": 0.5})))
+        force = []
+        while not sim.at_end:
+            diag = sim.step()
+            assert diag.contact.converged
+            force.append(diag.contact_forces(3, 2, sim.last_dt)[2, 1])
+        return np.array(force), sum(used)
+
+    mirrored, used = run(True)
+    plain, _ = run(False)
+    assert used >= len(mirrored) // 2  # measured: at each of the 15 steps
+    assert mirrored.size == plain.size
+    assert np.abs(mirrored / plain - 1.0).max() < 1e-4

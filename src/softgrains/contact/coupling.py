@@ -31,9 +31,12 @@ step of the bodies with a solve of the contact problem.
     and retried shorter
 
 Kinematic bodies take no impulse response (W = 0): their nodal velocity is their prescribed
-velocity. With ``tangent = "auto"`` a body whose compliance W_s is indefinite takes the
-projected tangent when a contact solve stalls on it, and all bodies switch to it within a
-step whose contact solves keep failing or that needs many iterations.
+velocity. With ``tangent = "auto"`` a body whose compliance W_s is indefinite on the
+impulses its contacts can carry (the exact tangent under compression) has its Newton
+matrix's negative modes mirrored when all its contacts are frictional (they hold the body
+in every direction; session 28), else takes the projected tangent when a contact solve
+stalls on it; all bodies switch to the projected tangent within a step whose contact
+solves keep failing or that needs many iterations.
 """
 
 from __future__ import annotations
@@ -283,6 +286,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         return ContactState(contacts, P, status, np.zeros(0)), diag
     mu = np.asarray(friction(contacts.alpha, contacts.beta), float)
     slots = Slots(steps, contacts, stencils)
+    slots.impulse_basis = [_impulse_basis(slots, slot, contacts.normal, mu)
+                           for slot in range(len(slots.bodies))]
     wall_va = np.zeros((n, d))
     wall_vb = np.zeros((n, d))
     for c in range(n):
@@ -349,7 +354,21 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # the Newton direction of every body not converged, with the current impulses
         du = {i: b.newton_direction(direct=delassus and i in in_contact)
               for i, b in steps.items() if not done[i]}
-        psd = _update_compliances(steps, slots, du, delassus)
+        psd = _update_compliances(steps, slots, set(du), delassus)
+        if not psd and delassus:
+            # tangent = "auto": a body whose W_s is indefinite (its exact tangent under
+            # compression) and whose contacts are all frictional has its Newton matrix's
+            # negative modes mirrored; its direction and W_s are redone. (Against
+            # frictionless contacts a negative mode can slide along them, and mirrored it
+            # stalled the quasi-static D10 squeeze at its step 5: there the exact tangent
+            # converges, or the projected one after a failed solve.)
+            shifted = [body for slot, body in enumerate(slots.bodies)
+                       if not slots.semidefinite[slot] and slots.impulse_basis[slot] is None
+                       and steps[body].mirror_negative_modes()]
+            for i in shifted:
+                du[i] = steps[i].newton_direction(direct=True)
+            if shifted:
+                psd = _update_compliances(steps, slots, set(shifted), delassus)
         # the contact rows' velocities at the end of that Newton step (linear prediction)
         V = slots.stack(lambda body, rows, du=du: _predicted_velocity(steps[body], rows,
                                                                       du.get(body)))
@@ -503,17 +522,17 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     return ContactState(contacts, P, status, estimated), diag
 
 
-def _update_compliances(steps: dict, slots: Slots, du: dict, delassus: bool) -> bool:
+def _update_compliances(steps: dict, slots: Slots, fresh: set, delassus: bool) -> bool:
     """Each body's compliance W_s at its contact rows where it is not known yet or its
-    Newton matrix changed (a new direction du); whether every W_s is positive semidefinite
-    (a projected tangent's is: A is SPD; an exact one's is checked)."""
+    Newton matrix changed (the bodies ``fresh``); whether every W_s is positive
+    semidefinite (a projected tangent's is: A is SPD; an exact one's is checked)."""
     for slot, body in enumerate(slots.bodies):
-        if not (slots.W[slot] is None or (delassus and body in du)):
+        if not (slots.W[slot] is None or (delassus and body in fresh)):
             continue
         slots.response[slot], W_rows = steps[body].contact_response(slots.rows[slot], delassus)
         slots.W[slot] = slots.compliance(slot, W_rows)
         slots.semidefinite[slot] = (not delassus or steps[body].projected
-                                    or _semidefinite(slots.W[slot]))
+                                    or _semidefinite(slots.W[slot], slots.impulse_basis[slot]))
     return all(slots.semidefinite)
 
 
@@ -528,8 +547,34 @@ def _switch_indefinite(steps: dict, slots: Slots) -> list[int]:
     return switched
 
 
-def _semidefinite(W: np.ndarray) -> bool:
-    """Whether the symmetric part of W has no eigenvalue below −INDEFINITE × max diag."""
+def _impulse_basis(slots: Slots, slot: int, normal: np.ndarray, mu: np.ndarray
+                   ) -> np.ndarray | None:
+    """Vectors spanning the impulses body ``slot``'s contacts can carry, in its W_s's
+    (column, component) order: every component at a column with a frictional contact,
+    the normals at the others (a frictionless contact carries no tangential impulse, so
+    W_s's tangential part is no part of the problem). None: every component."""
+    d, k = slots.d, int(slots.k_size[slot])
+    a, b = np.flatnonzero(slots.a_slot == slot), np.flatnonzero(slots.b_slot == slot)
+    contact, column = np.r_[a, b], np.r_[slots.a_col[a], slots.b_col[b]]
+    frictional = np.zeros(k, bool)
+    frictional[column[mu[contact] > 0.0]] = True
+    if frictional.all():
+        return None
+    full = np.flatnonzero(frictional)
+    normal_only = ~frictional[column]
+    basis = np.zeros((k * d, full.size * d + int(normal_only.sum())))
+    basis[(full[:, None] * d + np.arange(d)).ravel(), np.arange(full.size * d)] = 1.0
+    at = column[normal_only]
+    basis[at[:, None] * d + np.arange(d), full.size * d + np.arange(at.size)[:, None]] = \
+        normal[contact[normal_only]]
+    return basis
+
+
+def _semidefinite(W: np.ndarray, basis: np.ndarray | None = None) -> bool:
+    """Whether the symmetric part of W (on the span of ``basis``: Bᵀ W B) has no
+    eigenvalue below −INDEFINITE × max diag."""
+    if basis is not None:
+        W = basis.T @ W @ basis
     scale = float(np.abs(np.diagonal(W)).max(initial=0.0))
     if scale == 0.0:
         return True

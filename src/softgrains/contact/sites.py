@@ -90,6 +90,8 @@ class Slots:
         self.response: list[np.ndarray | None] = [None] * len(body_ids)
         self.W: list[np.ndarray | None] = [None] * len(body_ids)
         self.semidefinite = [False] * len(body_ids)  # W known to be PSD (coupling.py)
+        # per body: the span of the impulses its contacts can carry (None: all; coupling.py)
+        self.impulse_basis: list = [None] * len(body_ids)
 
     def sites(self, slot: int) -> int:
         H = self.H[slot]

@@ -52,7 +52,12 @@ from softgrains.integrator.assembly import (
     pair_codes,
     point_stresses,
 )
-from softgrains.integrator.linear_solvers import LinearSolver, factorize
+from softgrains.integrator.linear_solvers import (
+    DENSE_LIMIT,
+    LinearSolver,
+    factorize,
+    mirrored_negative_modes,
+)
 
 ACTIVE_MASS_FRACTION = 1e-4  # lighter nodes (fraction of the heaviest point) are removed
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
@@ -207,6 +212,7 @@ class BodyStep:
         st = self.settings = stepper.settings
         self.stepper, self.pts, self.dt, self.step = stepper, pts, dt, step
         self._projected = False  # tangent = "auto": switched to projected in this step
+        self._mirrored = False  # tangent = "auto": negative modes mirrored in this step
         d = self.d = stepper.lattice.dim
         self.newmark = st.kind == "newmark"
         self.consistent = st.mass_matrix == "consistent"
@@ -308,9 +314,35 @@ class BodyStep:
         step (the iterate is kept; only the Newton matrix changes). True if it switched."""
         if not self.can_project():
             return False
-        self._projected = True
+        self._projected, self._mirrored = True, False
         self._A = self._lu = None
         return True
+
+    def mirror_negative_modes(self) -> bool:
+        """With ``tangent = "auto"`` and the exact tangent: from now on in this step, the
+        Newton matrix's negative modes are mirrored, A⁺ = A + Σ_{λ<0} 2|λ| M v vᵀ M over
+        the eigenpairs A v = λ M v (M the lumped mass): positive definite, and equal to A
+        on every other mode, so the bulk keeps Newton's convergence where the projected
+        tangent (every compressed point's tangent changed) converges slowly. Only the
+        Newton matrix changes, not the residual: the step's solution is the same. False
+        where it does not apply: projected or exact tangent, a body above DENSE_LIMIT
+        unknowns (no dense eigensolve), or A without a negative mode."""
+        if not self.can_project() or self._mirrored or self.u.size > DENSE_LIMIT:
+            return False
+        A = self._A if self._A is not None else self.newton_matrix()
+        if mirrored_negative_modes(A, self.m.ravel()) is None:
+            return False
+        self._mirrored = True
+        self._A = self._lu = None
+        return True
+
+    def _matrix(self):
+        """The Newton matrix at the iterate: A (sparse), or A⁺ (dense) once mirrored."""
+        A = self.newton_matrix()
+        if self._mirrored:
+            mirrored = mirrored_negative_modes(A, self.m.ravel())
+            return A.toarray() if mirrored is None else mirrored
+        return A
 
     # -- the step equations ------------------------------------------------------------
     def mass_times(self, u: np.ndarray) -> np.ndarray:
@@ -389,7 +421,7 @@ class BodyStep:
         """The LU of the current Newton matrix A (reused from a direct Newton solve)."""
         if self._lu is None:
             if self._A is None:
-                self._A = self.newton_matrix()
+                self._A = self._matrix()
             self._lu = factorize(self._A)
         return self._lu
 
@@ -496,7 +528,7 @@ class BodyStep:
             return self._direction(direct)
 
     def _direction(self, direct: bool) -> np.ndarray:
-        A = self._A = self.newton_matrix()
+        A = self._A = self._matrix()
         solver, res = self.stepper.solver, self.result
         try:
             du = solver.solve(A, -self.r.ravel(), self.diag_slot, direct).reshape(self.u.shape)

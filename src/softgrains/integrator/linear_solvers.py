@@ -30,10 +30,11 @@ DENSE_LIMIT = 600
 class DenseLU:
     """A dense LU factorization with SuperLU's ``solve(b)`` (b a vector or a matrix)."""
 
-    def __init__(self, A: sp.spmatrix) -> None:
+    def __init__(self, A: sp.spmatrix | np.ndarray) -> None:
+        dense = A.toarray() if sp.issparse(A) else A
         with warnings.catch_warnings():  # a singular A raises below, as SuperLU does
             warnings.simplefilter("ignore", sla.LinAlgWarning)
-            lu, self.pivots = sla.lu_factor(A.toarray(), check_finite=False)
+            lu, self.pivots = sla.lu_factor(dense, check_finite=False)
         if not np.all(np.isfinite(lu)) or np.any(np.diagonal(lu) == 0.0):
             raise RuntimeError("Factor is exactly singular")
         self.lu = lu
@@ -44,9 +45,24 @@ class DenseLU:
 
 def factorize(A: sp.spmatrix):
     """The LU of A (dense up to DENSE_LIMIT unknowns, else SuperLU); ``.solve(b)``."""
-    if A.shape[0] <= DENSE_LIMIT:
+    if A.shape[0] <= DENSE_LIMIT or not sp.issparse(A):
         return DenseLU(A)
     return spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A")
+
+
+def mirrored_negative_modes(A: sp.spmatrix, m: np.ndarray) -> np.ndarray | None:
+    """A⁺ = A + Σ_{λ<0} 2|λ| M v vᵀ M (dense) over the eigenpairs A v = λ M v with
+    M = diag(m) > 0, A symmetric: the negative modes mirrored, the others unchanged (from
+    B = M^-½ A M^-½ = Σ λ u uᵀ, v = M^-½ u). None where A has no negative mode."""
+    root = np.sqrt(m)
+    dense = A.toarray()
+    B = dense / root[:, None] / root[None, :]
+    B = 0.5 * (B + B.T)
+    lam, U = sla.eigh(B, subset_by_value=(-np.inf, 0.0), check_finite=False)
+    if lam.size == 0:
+        return None
+    MV = U * root[:, None]  # M v = M^½ u
+    return dense + (MV * (-2.0 * lam)) @ MV.T
 
 
 def _block_jacobi(A: sp.bsr_matrix, diag_slot: np.ndarray) -> sp.bsr_matrix:
@@ -72,7 +88,7 @@ class LinearSolver:
               direct: bool = False) -> np.ndarray:
         """x = A⁻¹ b; ``direct`` forces the LU (a body in contact needs it for its Delassus
         compliance anyway: CG first would be spent for nothing)."""
-        if not (self.use_direct or direct):
+        if not (self.use_direct or direct or not sp.issparse(A)):  # a dense A: the LU
             x, info, its = self._cg(A, b, diag_slot)
             if info == 0:
                 self.last_method, self.last_iterations = "cg", its
