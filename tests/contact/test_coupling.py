@@ -330,6 +330,32 @@ def test_the_coupling_loop_gives_up_at_once_on_an_iterate_that_repeats():
     assert not restarted.stalled(1.09, [1.09, 0.2])
 
 
+def test_the_coupling_loop_gives_up_on_contact_solves_that_keep_failing():
+    """Progress (coupling.py): FAILED_SOLVES_IN_A_ROW contact solves in a row that fail
+    (every fallback spent) none 10% below the first one's residual stall the loop
+    (session 28: a dense frictional step whose solves stopped at 1.6-2.0e-4 against 1e-4
+    twelve times, 5.9 s, while its measure bounced); failed solves that still gain, or a
+    success between them, or a restart, do not."""
+    from softgrains.contact.coupling import FAILED_SOLVES_IN_A_ROW, Progress
+
+    failing = Progress()
+    measures, solves = [171.0, 8.0, 4.3, 2.4, 2.9, 2.6], [None, None, 1.7e-4, 1.6e-4, 2.0e-4,
+                                                          1.9e-4]
+    stalled_at = next(k for k, (m, r) in enumerate(zip(measures, solves, strict=True))
+                      if failing.stalled(m, None, r))
+    assert stalled_at == 2 + FAILED_SOLVES_IN_A_ROW - 1 and failing.unsolved
+    gaining = Progress()  # each failed solve 15% below the one before
+    assert not any(gaining.stalled(2.0, None, 1e-3 * 0.85 ** k) for k in range(10))
+    interrupted = Progress()  # a converged solve between the failed ones
+    assert not any(interrupted.stalled(2.0, None, None if k % 3 == 2 else 1.7e-4)
+                   for k in range(12))
+    restarted = Progress()
+    for _ in range(FAILED_SOLVES_IN_A_ROW - 1):
+        assert not restarted.stalled(2.0, None, 1.7e-4)
+    restarted.restart()  # a new tangent: the failures are forgotten
+    assert not restarted.stalled(2.0, None, 1.7e-4)
+
+
 def _kicked_disk(adaptive: bool) -> tuple[Simulation, np.ndarray, float]:
     """``_thrown_disk`` at rest, its front point 0.9 h from the slab's face (the edge of
     its cell, h/4 ahead, 0.65 h), for one step (its points then move 0: the next step's

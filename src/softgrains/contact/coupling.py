@@ -102,6 +102,12 @@ STALL_DESCENT = 5
 # iterate 42 times, 0.3 s each, before the stall test gave up)
 STUCK_REPEATS = 3
 STUCK_RESOLUTION = 1e-9
+# ... and when its contact solves fail (every fallback spent, short of the loop's
+# tolerance) FAILED_SOLVES_IN_A_ROW times in a row, none of them to a residual below
+# STALL_DECREASE × the first one's (session 28: a dense frictional step near 126 σ0
+# whose solves stopped at 1.6-2.0e-4 against 1e-4, 0.3 s each, 12 times before its
+# residuals repeated: 5.9 s, 11× the compaction's median step)
+FAILED_SOLVES_IN_A_ROW = 3
 # the end-of-step gap check (end_gaps.py): a point contact whose true end gap would pass
 # below its floor, min(its start gap, −GAP_OVERLAP h), by GAP_ERROR h or more has its
 # constraint corrected by the difference and the step solved again (a fixed point on the
@@ -177,11 +183,21 @@ class Progress:
     recent: list[float] = field(default_factory=list)
     residuals: list[np.ndarray] = field(default_factory=list)  # the last STUCK_REPEATS
     stuck: bool = False  # stalled because the residuals repeated unchanged
+    failing: list[float] = field(default_factory=list)  # failed solves' residuals
+    unsolved: bool = False  # stalled because the contact solves kept failing
 
-    def stalled(self, measure: float, residuals: np.ndarray | None = None) -> bool:
-        """Record this iteration's measure (and the ``residuals`` it is the largest of);
-        True when the loop has stalled: no progress (see the class), or the same
-        residuals STUCK_REPEATS times in a row."""
+    def stalled(self, measure: float, residuals: np.ndarray | None = None,
+                failed_solve: float | None = None) -> bool:
+        """Record this iteration's measure (and the ``residuals`` it is the largest of,
+        and the residual its contact solve stopped at if it failed); True when the loop
+        has stalled: no progress (see the class), the same residuals STUCK_REPEATS times
+        in a row, or FAILED_SOLVES_IN_A_ROW failed contact solves in a row, none 10%
+        below the first."""
+        self.failing = [] if failed_solve is None else self.failing + [failed_solve]
+        self.unsolved = (len(self.failing) >= FAILED_SOLVES_IN_A_ROW
+                         and min(self.failing[1:]) > STALL_DECREASE * self.failing[0])
+        if self.unsolved:
+            return True
         if residuals is not None:
             self.residuals = (self.residuals + [np.asarray(residuals, float)])[-STUCK_REPEATS:]
             self.stuck = len(self.residuals) == STUCK_REPEATS and all(
@@ -202,6 +218,7 @@ class Progress:
     def restart(self) -> None:
         """Forget the best (the iteration changed: a new tangent, corrected gaps)."""
         self.best, self.since, self.recent, self.residuals = math.inf, 0, [], []
+        self.failing = []
 
 
 @dataclass
@@ -466,7 +483,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         else:
             ratios = [diag.residual / settings.tolerance] + [
                 b.residual_ratio(p_scale * b.impulse_weight) for b in steps.values()]
-            if progress.stalled(max(ratios), np.array(ratios)):
+            if progress.stalled(max(ratios), np.array(ratios),
+                                result.residual if failed else None):
                 diag.stalled = True
                 break
     if not finished:
@@ -495,6 +513,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 f"step {step}: the contact loop "
                 + ((f"stalled after {diag.iterations} iterations, its residuals unchanged in "
                     f"the last {STUCK_REPEATS}" if progress.stuck else
+                    f"stalled after {diag.iterations} iterations, its contact solves failed "
+                    f"in the last {FAILED_SOLVES_IN_A_ROW} (none 10% below the first)"
+                    if progress.unsolved else
                     f"stalled after {diag.iterations} iterations, no progress in the last "
                     f"{STALL_ITERATIONS}") if diag.stalled else
                    f"did not converge in {settings.max_iterations} iterations")
