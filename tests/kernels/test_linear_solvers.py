@@ -71,3 +71,11 @@ def test_mirrored_negative_modes_flip_only_the_negative_eigenvalues():
     np.linalg.cholesky(0.5 * (mirrored + mirrored.T))  # positive definite
     positive = (Q * np.abs(lam)) @ Q.T * root[:, None] * root[None, :]
     assert mirrored_negative_modes(sp.csr_matrix(positive), m) is None
+    singular = (Q * np.r_[0.0, np.abs(lam[1:])]) @ Q.T * root[:, None] * root[None, :]
+    assert mirrored_negative_modes(sp.csr_matrix(singular), m) is None  # 0: no negative mode
+    # a dense Newton matrix (mirrored) is solved by the LU, also where CG is asked for
+    solver = LinearSolver("cg")
+    b = rng.standard_normal(n)
+    np.testing.assert_allclose(mirrored @ solver.solve(mirrored, b, np.zeros(0, np.int64)), b,
+                               atol=1e-10)
+    assert solver.last_method == "direct"

@@ -130,22 +130,28 @@ def test_a_frictional_squeeze_mirrors_the_negative_modes_and_keeps_its_solution(
     squeeze (D/h 10, Δt c/h 3000) with plates of μ = 0.5 makes the disk's exact tangent
     indefinite on its contacts' impulses (W_s not PSD) at every step; the disk's Newton
     matrix then has its negative modes mirrored (BodyStep.mirror_negative_modes) instead of
-    a failed contact solve and the projected tangent. Only the Newton matrix changes: the
-    plate force at every step is the one of the run without it, to the loop's tolerance
-    (1e-4; measured 2e-5)."""
+    a failed contact solve and the projected tangent: its W is then definite, and no step
+    switches to the projected tangent (without the mirror: one). Only the Newton matrix
+    changes: the plate force at every step is the one of the run without it, to the
+    loop's tolerance (1e-4; measured 2e-5)."""
     from softgrains.integrator.implicit import BodyStep
 
     bench = _benchmark()
-    mirror = BodyStep.mirror_negative_modes
+    mirror, project = BodyStep.mirror_negative_modes, BodyStep.use_projected_tangent
 
     def run(enabled):
-        used = []
+        used, projected = [], []
 
         def spy(step):
             used.append(mirror(step) if enabled else False)
             return used[-1]
 
+        def spy_projected(step):
+            projected.append(project(step))
+            return projected[-1]
+
         monkeypatch.setattr(BodyStep, "mirror_negative_modes", spy)
+        monkeypatch.setattr(BodyStep, "use_projected_tangent", spy_projected)
         sim = Simulation(load_case(bench.squeeze_case(10, 3000.0, 0.1, overrides={
             "contact.friction": 0.5})))
         force = []
@@ -153,10 +159,11 @@ def test_a_frictional_squeeze_mirrors_the_negative_modes_and_keeps_its_solution(
             diag = sim.step()
             assert diag.contact.converged
             force.append(diag.contact_forces(3, 2, sim.last_dt)[2, 1])
-        return np.array(force), sum(used)
+        return np.array(force), sum(used), sum(projected)
 
-    mirrored, used = run(True)
-    plain, _ = run(False)
+    mirrored, used, projected = run(True)
+    plain, _, _ = run(False)
     assert used >= len(mirrored) // 2  # measured: at each of the 15 steps
+    assert projected == 0
     assert mirrored.size == plain.size
     assert np.abs(mirrored / plain - 1.0).max() < 1e-4

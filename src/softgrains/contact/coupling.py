@@ -103,10 +103,10 @@ STALL_DESCENT = 5
 STUCK_REPEATS = 3
 STUCK_RESOLUTION = 1e-9
 # ... and when its contact solves fail (every fallback spent, short of the loop's
-# tolerance) FAILED_SOLVES_IN_A_ROW times in a row, none of them to a residual below
-# STALL_DECREASE × the first one's (session 28: a dense frictional step near 126 σ0
-# whose solves stopped at 1.6-2.0e-4 against 1e-4, 0.3 s each, 12 times before its
-# residuals repeated: 5.9 s, 11× the compaction's median step)
+# tolerance) FAILED_SOLVES_IN_A_ROW times in a row, the later ones' residuals and the
+# loop's measure none below STALL_DECREASE × the first one's (session 28: a dense
+# frictional step near 126 σ0 whose solves stopped at 1.6-2.0e-4 against 1e-4, 0.3 s
+# each, 12 times before its residuals repeated: 5.9 s, 11× the compaction's median step)
 FAILED_SOLVES_IN_A_ROW = 3
 # the end-of-step gap check (end_gaps.py): a point contact whose true end gap would pass
 # below its floor, min(its start gap, −GAP_OVERLAP h), by GAP_ERROR h or more has its
@@ -164,7 +164,7 @@ class ContactDiagnostics:
     # ≥ 0: energy put in, a part of −dissipation (the force acts along the start-of-step
     # normal while the true gap is held)
     correction_work: float = 0.0
-    stalled: bool = False  # stopped early: no progress in STALL_ITERATIONS iterations
+    stalled: bool = False  # stopped early by a stall test of Progress
 
 
 @dataclass
@@ -176,14 +176,17 @@ class Progress:
     STALL_ITERATIONS iterations and has not fallen at each of its last STALL_DESCENT
     iterations either: a cycle (contacts switching stick/slip/open in turn, a soft mode
     over- and undershot by a body's projected tangent) that more iterations do not cure,
-    where a shorter step does. A loop coming steadily back down from an excursion goes on."""
+    where a shorter step does. A loop coming steadily back down from an excursion goes on.
+    It has stalled at once, too, when its residuals repeat unchanged (STUCK_REPEATS) or
+    its contact solves keep failing without gain (FAILED_SOLVES_IN_A_ROW)."""
 
     best: float = math.inf
     since: int = 0
     recent: list[float] = field(default_factory=list)
     residuals: list[np.ndarray] = field(default_factory=list)  # the last STUCK_REPEATS
     stuck: bool = False  # stalled because the residuals repeated unchanged
-    failing: list[float] = field(default_factory=list)  # failed solves' residuals
+    # the last FAILED_SOLVES_IN_A_ROW (failed solve's residual, measure), in a row
+    failing: list[tuple[float, float]] = field(default_factory=list)
     unsolved: bool = False  # stalled because the contact solves kept failing
 
     def stalled(self, measure: float, residuals: np.ndarray | None = None,
@@ -191,11 +194,14 @@ class Progress:
         """Record this iteration's measure (and the ``residuals`` it is the largest of,
         and the residual its contact solve stopped at if it failed); True when the loop
         has stalled: no progress (see the class), the same residuals STUCK_REPEATS times
-        in a row, or FAILED_SOLVES_IN_A_ROW failed contact solves in a row, none 10%
-        below the first."""
-        self.failing = [] if failed_solve is None else self.failing + [failed_solve]
-        self.unsolved = (len(self.failing) >= FAILED_SOLVES_IN_A_ROW
-                         and min(self.failing[1:]) > STALL_DECREASE * self.failing[0])
+        in a row, or FAILED_SOLVES_IN_A_ROW failed contact solves in a row whose later
+        residuals and measures are none 10% below the first's."""
+        self.failing = ([] if failed_solve is None else
+                        (self.failing + [(failed_solve, measure)])[-FAILED_SOLVES_IN_A_ROW:])
+        first = self.failing[0] if self.failing else (0.0, 0.0)
+        self.unsolved = (len(self.failing) == FAILED_SOLVES_IN_A_ROW and all(
+            r > STALL_DECREASE * first[0] and m > STALL_DECREASE * first[1]
+            for r, m in self.failing[1:]))
         if self.unsolved:
             return True
         if residuals is not None:
@@ -380,7 +386,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # stalled the quasi-static D10 squeeze at its step 5: there the exact tangent
             # converges, or the projected one after a failed solve.)
             shifted = [body for slot, body in enumerate(slots.bodies)
-                       if not slots.semidefinite[slot] and slots.impulse_basis[slot] is None
+                       if body in du and not slots.semidefinite[slot]
+                       and slots.impulse_basis[slot] is None
                        and steps[body].mirror_negative_modes()]
             for i in shifted:
                 du[i] = steps[i].newton_direction(direct=True)
@@ -429,12 +436,15 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # du + X ΔQ = −A⁻¹ R(u; P_new), taken with the line search
         change = problem.row_impulses(result.impulse - P)
         for slot, body in enumerate(slots.bodies):
-            q = slots.to_rows(slot, change[slots.span(slot)])
+            at_sites = change[slots.span(slot)]
+            q = slots.to_rows(slot, at_sites)
             if not np.any(q):
                 continue
             s, rows = steps[body], slots.rows[slot]
             s.add_impulses(rows, q)
-            du[body] = du.get(body, 0.0) + s.impulse_move(rows, q, slots.response[slot])
+            # the response is the sites' where the body has a site map (Delassus)
+            moved = at_sites if delassus and slots.H[slot] is not None else q
+            du[body] = du.get(body, 0.0) + s.impulse_move(rows, moved, slots.response[slot])
         for i, step_u in du.items():
             steps[i].take_step(step_u)
         P = result.impulse
@@ -525,7 +535,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 f"and '{name_b}' at ({where})"
                 + (f"; bodies whose Newton residual is above its tolerance: "
                    f"{', '.join(bodies_left[:5])}" if bodies_left else "")
-                + ("); a cycle that more iterations do not cure: try a smaller dt (or more "
+                + ("); the contact problem has no solution within the tolerance at these "
+                   "iterates: try a smaller dt (or more [simulation] retry_halvings)."
+                   if diag.stalled and progress.unsolved else
+                   "); a cycle that more iterations do not cure: try a smaller dt (or more "
                    "[simulation] retry_halvings)." if diag.stalled else
                    "); try a smaller dt, more contact max_iterations"
                    + (", a looser contact tolerance or local_relation = \"delassus\"."
@@ -544,14 +557,16 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
 
 
 def _update_compliances(steps: dict, slots: Slots, fresh: set, delassus: bool) -> bool:
-    """Each body's compliance W_s at its contact rows where it is not known yet or its
+    """Each body's compliance W_s at its contact sites where it is not known yet or its
     Newton matrix changed (the bodies ``fresh``); whether every W_s is positive
-    semidefinite (a projected tangent's is: A is SPD; an exact one's is checked)."""
+    semidefinite on the impulses its contacts can carry (``_impulse_basis``; a projected
+    tangent's is: A is SPD; an exact one's is checked)."""
     for slot, body in enumerate(slots.bodies):
         if not (slots.W[slot] is None or (delassus and body in fresh)):
             continue
-        slots.response[slot], W_rows = steps[body].contact_response(slots.rows[slot], delassus)
-        slots.W[slot] = slots.compliance(slot, W_rows)
+        H = slots.H[slot] if delassus else None
+        slots.response[slot], W = steps[body].contact_response(slots.rows[slot], delassus, H)
+        slots.W[slot] = W if H is not None else slots.compliance(slot, W)
         slots.semidefinite[slot] = (not delassus or steps[body].projected
                                     or _semidefinite(slots.W[slot], slots.impulse_basis[slot]))
     return all(slots.semidefinite)

@@ -395,10 +395,15 @@ class BodyStep:
             self._v_affine = (kappa, v0)
         return self._v_affine
 
-    def contact_response(self, rows: np.ndarray, delassus: bool
+    def contact_response(self, rows: np.ndarray, delassus: bool,
+                         sites: sp.spmatrix | None = None
                          ) -> tuple[np.ndarray | None, np.ndarray]:
         """The impulse-to-iterate map X = w A⁻¹ E (or None for the lumped relation) and the
-        local compliance W = κ w [A⁻¹]_cc (ALGORITHM.md §6) at the active ``rows``.
+        local compliance W = κ w [A⁻¹]_cc (ALGORITHM.md §6) at the active ``rows``; with
+        ``sites`` H (sites d × k d, Delassus), at the sites v_s = H v_rows instead:
+        X = w A⁻¹ E Hᵀ and W = κ H X_rows, one column per site component (a grain's
+        point sites are fewer than the node rows their stencils reach: 166 against 222
+        components in the dense compaction).
 
         W is (k d × k d), rows and columns ordered (row, component); lumped: diag(1/m).
         Fixed (Dirichlet) dofs take no impulse: their columns and rows are zero.
@@ -411,11 +416,17 @@ class BodyStep:
         if not delassus:
             W = np.diag(1.0 / self.m[rows].ravel() * free[dofs])
             return None, W
-        E = np.zeros((self.u.size, k * d))
-        E[dofs, np.arange(k * d)] = free[dofs]
+        if sites is None:
+            E = np.zeros((self.u.size, k * d))
+            E[dofs, np.arange(k * d)] = free[dofs]
+        else:
+            E = np.zeros((self.u.size, sites.shape[0]))
+            E[dofs] = (sites.T.toarray() if sp.issparse(sites) else sites.T) * free[dofs, None]
         X = self.factorization().solve(E) * w
         X[~free] = 0.0
-        return X, kappa * X[dofs]
+        if sites is None:
+            return X, kappa * X[dofs]
+        return X, kappa * np.asarray(sites @ X[dofs])
 
     def factorization(self):
         """The LU of the current Newton matrix A (reused from a direct Newton solve)."""
@@ -568,7 +579,8 @@ class BodyStep:
     def impulse_move(self, rows: np.ndarray, Q: np.ndarray,
                      response: np.ndarray | None) -> np.ndarray:
         """Δu caused by impulse changes Q at ``rows``: X Q with the response X = w A⁻¹ E of
-        :meth:`contact_response` (Delassus), or w Q/(c_m m) at the rows alone (lumped)."""
+        :meth:`contact_response` (Delassus; Q then at the sites where X is theirs), or
+        w Q/(c_m m) at the rows alone (lumped)."""
         if response is not None:
             return (response @ Q.ravel()).reshape(self.u.shape)
         move = np.zeros_like(self.u)

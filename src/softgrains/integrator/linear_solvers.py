@@ -25,6 +25,7 @@ CG_RELATIVE_TOLERANCE = 1e-10
 # dense compaction), which LAPACK's blocked solves give in half SuperLU's time (session 26:
 # 0.126 s against 0.253 s for a step's 54 factorizations)
 DENSE_LIMIT = 600
+NEGATIVE_MODE = 1e-12  # an eigenvalue below −this × max diag is a negative mode
 
 
 class DenseLU:
@@ -43,8 +44,9 @@ class DenseLU:
         return sla.lu_solve((self.lu, self.pivots), b, check_finite=False)
 
 
-def factorize(A: sp.spmatrix):
-    """The LU of A (dense up to DENSE_LIMIT unknowns, else SuperLU); ``.solve(b)``."""
+def factorize(A: sp.spmatrix | np.ndarray):
+    """The LU of A (dense for a dense A or up to DENSE_LIMIT unknowns, else SuperLU);
+    ``.solve(b)``."""
     if A.shape[0] <= DENSE_LIMIT or not sp.issparse(A):
         return DenseLU(A)
     return spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A")
@@ -58,7 +60,9 @@ def mirrored_negative_modes(A: sp.spmatrix, m: np.ndarray) -> np.ndarray | None:
     dense = A.toarray()
     B = dense / root[:, None] / root[None, :]
     B = 0.5 * (B + B.T)
-    lam, U = sla.eigh(B, subset_by_value=(-np.inf, 0.0), check_finite=False)
+    # below round-off of B's scale: a zero eigenvalue is no negative mode
+    below = -NEGATIVE_MODE * float(np.abs(np.diagonal(B)).max(initial=0.0))
+    lam, U = sla.eigh(B, subset_by_value=(-np.inf, below), check_finite=False)
     if lam.size == 0:
         return None
     MV = U * root[:, None]  # M v = M^½ u
@@ -84,10 +88,11 @@ class LinearSolver:
         self.last_iterations = 0
         self.last_factorization = None  # the LU of the last direct solve (contact reuses it)
 
-    def solve(self, A: sp.bsr_matrix, b: np.ndarray, diag_slot: np.ndarray,
+    def solve(self, A: sp.bsr_matrix | np.ndarray, b: np.ndarray, diag_slot: np.ndarray,
               direct: bool = False) -> np.ndarray:
         """x = A⁻¹ b; ``direct`` forces the LU (a body in contact needs it for its Delassus
-        compliance anyway: CG first would be spent for nothing)."""
+        compliance anyway: CG first would be spent for nothing), as does a dense A (a
+        Newton matrix with mirrored negative modes)."""
         if not (self.use_direct or direct or not sp.issparse(A)):  # a dense A: the LU
             x, info, its = self._cg(A, b, diag_slot)
             if info == 0:
