@@ -159,14 +159,18 @@ class _Body:
         switched, self.projected = not self.projected, True
         return switched
 
+    def mirror_negative_modes(self):
+        return False  # as for a body above DENSE_LIMIT unknowns
+
 
 def test_a_body_with_an_indefinite_compliance_switches_to_the_projected_tangent():
     """tangent = "auto": a body whose W at its contact rows has a negative eigenvalue (an
     exact tangent under compression; the contact problem is not monotone there and its
     solves stalled at 450-690 iterations in a dense compaction) is flagged, and when the
-    solve stalls it takes the projected tangent (its W redone); a semidefinite W, singular
-    ones included (redundant sites), keeps the exact tangent. With tangent = "exact" the
-    indefinite W stays."""
+    solve stalls it takes the mirrored negative modes, or the projected tangent where the
+    mirror does not apply (its W redone); a semidefinite W, singular ones included
+    (redundant sites), keeps the exact tangent. With tangent = "exact" the indefinite W
+    stays."""
     from types import SimpleNamespace
 
     from softgrains.contact.coupling import (
@@ -195,6 +199,13 @@ def test_a_body_with_an_indefinite_compliance_switches_to_the_projected_tangent(
     assert not _update_compliances({3: stuck, 5: singular}, slots, fresh, delassus=True)
     assert _switch_indefinite({3: stuck, 5: singular}, slots) == []
     assert not stuck.projected
+    # a body the mirror applies to takes it first (after a failed solve), not the projection
+    mirrored = _Body([[1.0, 2.0], [2.0, 1.0]])
+    mirrored.mirror_negative_modes = lambda: True
+    slots.W, slots.semidefinite = [None, None], [False, False]
+    assert not _update_compliances({3: mirrored, 5: singular}, slots, fresh, delassus=True)
+    assert _switch_indefinite({3: mirrored, 5: singular}, slots) == [3]
+    assert not mirrored.projected and slots.W[0] is None
     # round-off below a PSD matrix's zero eigenvalue is not indefiniteness
     rotation = np.array([[0.6, 0.8], [-0.8, 0.6]])
     assert _semidefinite(rotation @ np.diag([1.0, -1e-13]) @ rotation.T)

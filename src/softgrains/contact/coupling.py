@@ -34,9 +34,9 @@ Kinematic bodies take no impulse response (W = 0): their nodal velocity is their
 velocity. With ``tangent = "auto"`` a body whose compliance W_s is indefinite on the
 impulses its contacts can carry (the exact tangent under compression) has its Newton
 matrix's negative modes mirrored when all its contacts are frictional (they hold the body
-in every direction; session 28), else takes the projected tangent when a contact solve
-stalls on it; all bodies switch to the projected tangent within a step whose contact
-solves keep failing or that needs many iterations.
+in every direction; session 28), else when a contact solve stalls on it (the projected
+tangent where the mirror does not apply); all bodies switch to the projected tangent
+within a step whose contact solves keep failing or that needs many iterations.
 """
 
 from __future__ import annotations
@@ -384,7 +384,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # negative modes mirrored; its direction and W_s are redone. (Against
             # frictionless contacts a negative mode can slide along them, and mirrored it
             # stalled the quasi-static D10 squeeze at its step 5: there the exact tangent
-            # converges, or the projected one after a failed solve.)
+            # converges, or the mirror after a failed solve, _switch_indefinite.)
             shifted = [body for slot, body in enumerate(slots.bodies)
                        if body in du and not slots.semidefinite[slot]
                        and slots.impulse_basis[slot] is None
@@ -412,9 +412,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         failed = result.residual > max(settings.tolerance, tolerance)
         if failed and switchable:
             # a stalled solve on an indefinite W (seen at 450-690 iterations a solve in a
-            # dense compaction, with the fallbacks): those bodies take the projected
-            # tangent and the iteration is redone (not counted as a failed solve: that
-            # would switch every body at the next one)
+            # dense compaction, with the fallbacks): those bodies take the mirrored (or
+            # projected) tangent and the iteration is redone (not counted as a failed
+            # solve: that would switch every body at the next one)
             for i in _switch_indefinite(steps, slots):
                 done[i] = False
             progress.restart()
@@ -573,11 +573,16 @@ def _update_compliances(steps: dict, slots: Slots, fresh: set, delassus: bool) -
 
 
 def _switch_indefinite(steps: dict, slots: Slots) -> list[int]:
-    """``tangent = "auto"``: the bodies whose W_s is indefinite (an exact tangent under
-    compression) take the projected tangent; their W_s is dropped. Returns them."""
+    """``tangent = "auto"``, after a failed contact solve: the bodies whose W_s is
+    indefinite (an exact tangent under compression) take the mirrored negative modes
+    (session 28: the frictionless dense band −21%, half the coupling iterations, against
+    the projected tangent), or the projected tangent where the mirror does not apply
+    (a body above DENSE_LIMIT unknowns); their W_s is dropped. Returns them."""
     switched = []
     for slot, body in enumerate(slots.bodies):
-        if not slots.semidefinite[slot] and steps[body].use_projected_tangent():
+        if slots.semidefinite[slot]:
+            continue
+        if steps[body].mirror_negative_modes() or steps[body].use_projected_tangent():
             slots.W[slot] = None
             switched.append(body)
     return switched
