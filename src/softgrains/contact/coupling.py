@@ -198,10 +198,9 @@ class Progress:
         residuals and measures are none 10% below the first's."""
         self.failing = ([] if failed_solve is None else
                         (self.failing + [(failed_solve, measure)])[-FAILED_SOLVES_IN_A_ROW:])
-        first = self.failing[0] if self.failing else (0.0, 0.0)
-        self.unsolved = (len(self.failing) == FAILED_SOLVES_IN_A_ROW and all(
-            r > STALL_DECREASE * first[0] and m > STALL_DECREASE * first[1]
-            for r, m in self.failing[1:]))
+        self.unsolved = len(self.failing) == FAILED_SOLVES_IN_A_ROW and all(
+            r > STALL_DECREASE * self.failing[0][0] and m > STALL_DECREASE * self.failing[0][1]
+            for r, m in self.failing[1:])
         if self.unsolved:
             return True
         if residuals is not None:

@@ -421,12 +421,12 @@ class BodyStep:
             E[dofs, np.arange(k * d)] = free[dofs]
         else:
             E = np.zeros((self.u.size, sites.shape[0]))
-            E[dofs] = (sites.T.toarray() if sp.issparse(sites) else sites.T) * free[dofs, None]
+            E[dofs] = sites.T.toarray() * free[dofs, None]
         X = self.factorization().solve(E) * w
         X[~free] = 0.0
         if sites is None:
             return X, kappa * X[dofs]
-        return X, kappa * np.asarray(sites @ X[dofs])
+        return X, kappa * (sites @ X[dofs])
 
     def factorization(self):
         """The LU of the current Newton matrix A (reused from a direct Newton solve)."""
