@@ -43,12 +43,11 @@ step below its prediction at an impact (session 11, docs/dev-notes.md).
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from itertools import chain
 
 import numpy as np
 from numba import njit
-from scipy.spatial import cKDTree
 
+from softgrains.contact.neighbours import PointCells
 from softgrains.geometry import Disk, Rectangle
 from softgrains.grid.shape_functions import compute_stencils, stencil_width
 
@@ -208,15 +207,6 @@ def calibrated_distance(value: np.ndarray, grad: np.ndarray, radius: float
     return np.where(value > 0.0, -radius * inside, np.inf), lam
 
 
-def _neighbours(tree, x: np.ndarray, radius: float) -> tuple[np.ndarray, np.ndarray]:
-    """Points of a body within ``radius`` of each x, in CSR form."""
-    found = tree.query_ball_point(x, radius, return_sorted=False)
-    counts = np.fromiter(map(len, found), np.int64, count=len(found))
-    ptr = np.r_[0, np.cumsum(counts)].astype(np.int64)
-    flat = np.fromiter(chain.from_iterable(found), np.int64, count=int(ptr[-1]))
-    return ptr, flat
-
-
 class KernelSurface:
     """A deformable body's smoothed volume fraction c(x) = Σ_q V_q W(x − x_q) from its
     points at the start of the step (its BodyStep), and c's rate in its nodal velocities."""
@@ -224,7 +214,7 @@ class KernelSurface:
     def __init__(self, step) -> None:
         self.step = step
         self.radius = KERNEL_RADIUS * step.stepper.lattice.h
-        self.tree = cKDTree(step.pts.x)
+        self.cells = PointCells(step.pts.x, self.radius)
         self._own_distance = None
 
     def own_distance(self) -> np.ndarray:
@@ -237,7 +227,7 @@ class KernelSurface:
 
     def field(self, x: np.ndarray):
         """c and ∇c at x, and the neighbour lists (CSR) they were summed over."""
-        ptr, nb = _neighbours(self.tree, x, self.radius)
+        ptr, nb = self.cells.ball(x)
         value, grad = np.empty(len(x)), np.empty(x.shape)
         _kernel_field(x, ptr, nb, self.step.pts.x, self.step.pts.vol, self.radius, value, grad)
         return value, grad, (ptr, nb)
