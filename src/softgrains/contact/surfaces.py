@@ -53,6 +53,7 @@ from softgrains.grid.shape_functions import compute_stencils, stencil_width
 
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz  # NumPy ≥ 2 / 1.26
 FIELD_FLOOR = 1e-9  # a smoothed volume fraction below this does not reach the point
+PSEUDO_INVERSE_RCOND = 1e-8  # the first-moment correction's C⁺ drops eigenvalues below this
 
 
 @dataclass(frozen=True)
@@ -256,8 +257,7 @@ class KernelSurface:
         compute_stencils(x, lattice.node_origin, lattice.h, kind, base, N, np.empty((n, s**d, d)))
         rows, weights = np.empty((n, s**d), np.int64), np.empty((n, s**d))
         _stencil_rows(base, N, step.box.lower, step.box.shape, step.active_row, rows, weights)
-        offsets = _stencil_offsets(base, lattice.node_origin, lattice.h, s, x)
-        _first_moment_correction(offsets, weights)
+        _first_moment_correction(x, base, lattice.node_origin, lattice.h, weights)
         return rows, weights
 
 
@@ -285,27 +285,56 @@ def _stencil_rows(base, N, lower, shape, active_row, rows, weights):
             weights[p, k] = weights[p, k] / total if total > 0.0 else 0.0
 
 
-def _stencil_offsets(base: np.ndarray, origin: np.ndarray, h: float, s: int,
-                     x: np.ndarray) -> np.ndarray:
-    """X_k − x for each stencil node k of each x (n, s^d, d), in compute_stencils' order
-    (first axis fastest)."""
-    n, d = base.shape
-    local = np.stack(np.meshgrid(*([np.arange(s)] * d), indexing="ij"), axis=-1)
-    local = local.transpose(*reversed(range(d)), d).reshape(-1, d)  # first axis fastest
-    return origin + (base[:, None, :] + local[None, :, :]) * h - x[:, None, :]
-
-
-def _first_moment_correction(offsets: np.ndarray, weights: np.ndarray) -> None:
+@njit(cache=True)
+def _first_moment_correction(x, base, origin, h, weights):
     """Make weights w_k (Σ w = 1, some nodes dropped) reproduce linear fields at x:
     w_k ← w_k (1 − (X_k − x̄)ᵀ C⁺ (x̄ − x)), x̄ − x = Σ w_k (X_k − x), C = Σ w_k (X_k − x̄)
     (X_k − x̄)ᵀ, so that Σ w_k = 1 and Σ w_k X_k = x (a rigid motion's velocity at x; an
     impulse through them acts at x, with its moment). Where the remaining nodes lie on a
-    line (C singular: linear hats) only the component along it is corrected."""
-    mean = np.einsum("pk,pkj->pj", weights, offsets)
-    centred = offsets - mean[:, None, :]
-    C = np.einsum("pk,pki,pkj->pij", weights, centred, centred)
-    coef = -np.einsum("pij,pj->pi", np.linalg.pinv(C, rcond=1e-8, hermitian=True), mean)
-    weights *= 1.0 + np.einsum("pkj,pj->pk", centred, coef)
+    line (C singular: linear hats) only the component along it is corrected (C⁺ the
+    pseudo-inverse, eigenvalues below 1e-8 of the largest dropped). Stencil node k in
+    compute_stencils' order (first axis fastest)."""
+    n, ns = weights.shape
+    d = x.shape[1]
+    s = int(round(ns ** (1.0 / d)))
+    offsets = np.empty((ns, d))
+    mean = np.empty(d)
+    coef = np.empty(d)
+    C = np.empty((d, d))
+    for p in range(n):
+        for k in range(ns):
+            rem = k
+            for j in range(d):
+                offsets[k, j] = origin[j] + (base[p, j] + rem % s) * h - x[p, j]
+                rem //= s
+        for j in range(d):
+            mean[j] = 0.0
+            for k in range(ns):
+                mean[j] += weights[p, k] * offsets[k, j]
+        for i in range(d):
+            for j in range(d):
+                C[i, j] = 0.0
+                for k in range(ns):
+                    C[i, j] += (weights[p, k] * (offsets[k, i] - mean[i])
+                                * (offsets[k, j] - mean[j]))
+        lam, vec = np.linalg.eigh(C)
+        largest = 0.0
+        for i in range(d):
+            largest = max(largest, abs(lam[i]))
+        for j in range(d):
+            coef[j] = 0.0
+        for i in range(d):
+            if abs(lam[i]) > PSEUDO_INVERSE_RCOND * largest:
+                along = 0.0
+                for j in range(d):
+                    along += vec[j, i] * mean[j]
+                for j in range(d):
+                    coef[j] -= vec[j, i] * along / lam[i]
+        for k in range(ns):
+            moment = 0.0
+            for j in range(d):
+                moment += (offsets[k, j] - mean[j]) * coef[j]
+            weights[p, k] *= 1.0 + moment
 
 
 def cell_support(F: np.ndarray, n: np.ndarray, spacing: float, round_body: bool
@@ -340,20 +369,34 @@ def edge_stencil(step, points: np.ndarray, r: np.ndarray) -> tuple[np.ndarray, n
     return step.active_row[step.nodes[points]], weights
 
 
-def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float):
-    """Body ``own``'s outer points against ``other``'s surface T: their indices, gaps,
-    T's outward normals, the own stencils (the velocity of each point's cell edge), T's
-    sampled stencils and T's exact normal velocity (rows, vectors, normal). A point is seen
-    only within T's kernel reach (c > 0: about 1.25 h outside T's surface) and where T has
-    an active node in its stencil: two grains closing faster than ~1 h a step meet one
-    step late."""
+def _outer_candidates(own: int, other: int, surfaces: dict, spacing: float,
+                      reach: float) -> np.ndarray:
+    """Body ``own``'s outer points (d_O > −δ) within ``other``'s box widened by the reach and
+    its kernel radius: the points that may meet its surface."""
     O, T = surfaces[own], surfaces[other]
     x = O.step.pts.x
     lo, hi = T.step.pts.x.min(axis=0), T.step.pts.x.max(axis=0)
     margin = reach + T.radius
     near_box = np.flatnonzero(np.all((x > lo - margin) & (x < hi + margin), axis=1))
-    candidates = near_box[O.own_distance()[near_box] > -spacing]  # own's outer layer
-    xc = x[candidates]
+    return near_box[O.own_distance()[near_box] > -spacing]
+
+
+def _passes_against(other: int, owners: list[int], surfaces: dict, spacing: float,
+                    reach: float) -> list[tuple]:
+    """The outer points of each body in ``owners`` against ``other``'s surface T, in one
+    evaluation of T's field, stencils and rates over all of them. Per owner O: the points'
+    indices, gaps, T's outward normals, the own stencils (the velocity of each point's cell
+    edge), T's sampled stencils and T's exact normal velocity (rows, vectors, normal). A
+    point is seen only within T's kernel reach (c > 0: about 1.25 h outside T's surface)
+    and where T has an active node in its stencil: two grains closing faster than ~1 h a
+    step meet one step late."""
+    T = surfaces[other]
+    candidates = [_outer_candidates(own, other, surfaces, spacing, reach) for own in owners]
+    sizes = [c.size for c in candidates]
+    xc = np.concatenate([surfaces[own].step.pts.x[c] for own, c in zip(owners, candidates,
+                                                                     strict=True)])
+    Fc = np.concatenate([surfaces[own].step.pts.F[c] for own, c in zip(owners, candidates,
+                                                                     strict=True)])
     c, grad, near = T.field(xc)
     length = np.linalg.norm(grad, axis=1)
     distance, lam = calibrated_distance(c, grad, T.radius)
@@ -361,20 +404,30 @@ def _pass(own: int, other: int, surfaces: dict, spacing: float, reach: float):
         n_out = -grad / length[:, None]
         # the distance to T's surface less the point's half cell, per unit of its rate
         # n·(v_O − v_T): g/λ
-        gap, support = edge_gap(distance, n_out, O.step.pts.F[candidates], spacing, True)
+        gap, support = edge_gap(distance, n_out, Fc, spacing, True)
         gap /= lam
     rows, weights = T.velocity_stencil(xc)
     reached = ((c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap) & (gap < reach)
                & (weights.sum(axis=1) > 0.5))
-    keep, which = candidates[reached], np.flatnonzero(reached)
-    n_out = n_out[reached]
+    which = np.flatnonzero(reached)
     counts = np.diff(near[0])
     sub_ptr = np.r_[0, np.cumsum(counts[which])].astype(np.int64)
     sub_nb = near[1][np.repeat(reached, counts)]  # the neighbour lists of the kept points
     rate_rows, rate_vec = T.rate(xc[reached], (sub_ptr, sub_nb))
     rate_vec /= length[reached][:, None, None]
-    return (keep, gap[reached], n_out, edge_stencil(O.step, keep, support[reached]),
-            (rows[reached], weights[reached]), (rate_rows, rate_vec, n_out))
+    out, start, at = [], 0, 0
+    for own, candidate, size in zip(owners, candidates, sizes, strict=True):
+        mine = reached[start:start + size]
+        kept = int(mine.sum())
+        span, kept_span = slice(start, start + size), slice(at, at + kept)
+        keep = candidate[mine]
+        normal = n_out[span][mine]
+        out.append((keep, gap[span][mine], normal,
+                    edge_stencil(surfaces[own].step, keep, support[span][mine]),
+                    (rows[span][mine], weights[span][mine]),
+                    (rate_rows[kept_span], rate_vec[kept_span], normal)))
+        start, at = start + size, at + kept
+    return out
 
 
 def shape_distance(shape, x: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -457,13 +510,22 @@ def _concatenate(parts: list[tuple]) -> SurfaceContacts:
 
 def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,
                      reach: float) -> SurfaceContacts:
-    """Both passes for every pair (α, β) of deformable bodies, α < β."""
+    """Both passes for every pair (α, β) of deformable bodies, α < β (evaluated surface by
+    surface, :func:`_passes_against`; listed pair by pair, α's points first)."""
     surfaces = {b: KernelSurface(steps[b]) for pair in pairs for b in pair}
+    owners: dict[int, list[int]] = {}
+    for a, b in pairs:
+        owners.setdefault(b, []).append(a)
+        owners.setdefault(a, []).append(b)
+    found = {}
+    for other, own_bodies in owners.items():
+        for own, result in zip(own_bodies, _passes_against(other, own_bodies, surfaces,
+                                                           spacing, reach), strict=True):
+            found[own, other] = result
     parts = []
     for a, b in pairs:
         for own, other in ((a, b), (b, a)):
-            idx, gap, n_out, own_st, other_st, rate = _pass(own, other, surfaces, spacing,
-                                                            reach)
+            idx, gap, n_out, own_st, other_st, rate = found[own, other]
             own_alpha = own == a
             # normal from β into α: out of β's surface in the first pass, into α's in the
             # second
