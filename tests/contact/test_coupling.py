@@ -454,3 +454,41 @@ def test_a_step_whose_points_outran_its_contact_search_is_redone_with_the_full_r
     sim, disk, face = _kicked_disk(True)
     sim.step()
     assert sim.reach_retries == 0 and sim.state.x[disk, 0].max() > face - 0.1 * h
+
+
+def _landing_block(monkeypatch, working_set_gap: float) -> tuple[Simulation, int]:
+    """``_block_on_slab`` (0.2 h above the slab) for 25 steps with the working set's gap
+    ``working_set_gap`` (contact/coupling.py); the final state and the working set's
+    growths."""
+    import softgrains.contact.coupling as coupling
+
+    monkeypatch.setattr(coupling, "WORKING_SET_GAP", working_set_gap)
+    sim = _block_on_slab(steps=25)
+    growths = 0
+    for _ in range(sim.n_steps):
+        sim.step()
+        growths += sim.last_diagnostics.contact.working_set_growths
+    return sim, growths
+
+
+def test_contacts_left_out_of_the_working_set_join_it_when_they_close(monkeypatch):
+    """The working set (session 29): a step's contact problem is posed on the contacts that
+    carried an impulse and those the first Newton directions bring within WORKING_SET_GAP
+    h of closing; a contact left out that closes joins it and the loop goes on. With the
+    gap −1 (no contact is predicted to close that far: each step starts from the contacts
+    loaded at the last and the one closest to closing), the landing block's other contacts
+    join as they close, and the block lands as with every contact in the problem (gap inf):
+    positions within 1e-5 h (measured 8.9e-7 h: the loop's tolerance, 1e-4 of the
+    impulses, with 11 loaded contacts at the end instead of 16 of the same statically
+    indeterminate support). Without the growth the contacts left out would let the block
+    into the slab."""
+    h = 0.1
+    tight, grown = _landing_block(monkeypatch, -1.0)
+    full, never = _landing_block(monkeypatch, np.inf)
+    assert grown > 0 and never == 0
+    assert np.abs(tight.state.x - full.state.x).max() < 1e-5 * h
+    block = tight.model.bodies[0].points
+    assert tight.state.x[block, 1].min() > 0.6 - 0.05 * h  # on the slab's face, not in it
+    n_tight = tight.last_diagnostics.contact.working_set
+    n_full = full.last_diagnostics.contact.working_set
+    assert n_tight < n_full == full.last_diagnostics.contact.n_contacts
