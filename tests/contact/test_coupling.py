@@ -492,3 +492,35 @@ def test_contacts_left_out_of_the_working_set_join_it_when_they_close(monkeypatc
     n_tight = tight.last_diagnostics.contact.working_set
     n_full = full.last_diagnostics.contact.working_set
     assert n_tight < n_full == full.last_diagnostics.contact.n_contacts
+
+
+def test_a_solve_that_fails_on_the_working_set_is_redone_on_every_contact(monkeypatch):
+    """Session 29: a contact solve that fails on the working set (seen twice in 60 dense
+    compaction steps: a Tresca fixed point stalled at 6-8e-4 where the problem on every
+    contact converged) is redone on every contact, and the step goes on with them. Here
+    every solve on fewer than all the landing block's contacts is made to fail: each step
+    with contacts ends on all of them, converged, as a run without a working set (the
+    positions within 1e-5 h)."""
+    from dataclasses import replace
+
+    import softgrains.contact.coupling as coupling
+
+    real = coupling.solve
+    seen = {"all": 0, "failed": 0}
+
+    def failing_on_fewer(problem, P0=None, options=None):
+        result = real(problem, P0, options)
+        seen["all"] = max(seen["all"], problem.n_contacts)
+        if problem.n_contacts < seen["all"]:
+            seen["failed"] += 1
+            return replace(result, residual=1.0, converged=False)
+        return result
+
+    full, _ = _landing_block(monkeypatch, np.inf)
+    monkeypatch.setattr(coupling, "solve", failing_on_fewer)
+    sim, _ = _landing_block(monkeypatch, coupling.WORKING_SET_GAP)
+    contact = sim.last_diagnostics.contact
+    assert seen["failed"] > 0
+    assert contact.converged and contact.working_set == contact.n_contacts
+    assert sim.unconverged_contact_steps == 0 and sim.retried_steps == 0
+    assert np.abs(sim.state.x - full.state.x).max() < 1e-5 * 0.1

@@ -52,20 +52,21 @@ def end_gaps(sc: SurfaceContacts, steps: dict, walls: dict, spacing: float,
     where the point has left the other body's kernel reach."""
     moved = {b: moved_points(steps[b]) for b in set(sc.alpha.tolist()) | set(sc.beta.tolist())
              if b in steps}
-    surfaces = {}  # each grain's kernel surface from its moved points, built once
     gap = np.full(len(sc.gap), np.nan)
     own = np.where(sc.owner_is_alpha, sc.alpha, sc.beta)
     other = np.where(sc.owner_is_alpha, sc.beta, sc.alpha)
-    for o, t in sorted(set(zip(own.tolist(), other.tolist(), strict=True))):
-        which = np.flatnonzero((own == o) & (other == t))
-        pts = moved[o]
-        x, F = pts.x[sc.point[which]], pts.F[sc.point[which]]
+    d = sc.position.shape[1]
+    for t in sorted(set(other.tolist())):  # each surface once, over all points against it
+        which = np.flatnonzero(other == t)
+        x, F = np.empty((which.size, d)), np.empty((which.size, d, d))
+        for o in set(own[which].tolist()):
+            mine = own[which] == o
+            x[mine] = moved[o].x[sc.point[which[mine]]]
+            F[mine] = moved[o].F[sc.point[which[mine]]]
         if t in steps:  # T's kernel surface, from its moved points
-            if t not in surfaces:
-                surfaces[t] = KernelSurface(SimpleNamespace(pts=moved[t],
-                                                            stepper=steps[t].stepper))
-            c, grad, _ = surfaces[t].field(x)
-            distance, lam = calibrated_distance(c, grad, surfaces[t].radius)
+            surface = KernelSurface(SimpleNamespace(pts=moved[t], stepper=steps[t].stepper))
+            c, grad, _ = surface.field(x)
+            distance, lam = calibrated_distance(c, grad, surface.radius)
             with np.errstate(divide="ignore", invalid="ignore"):
                 n_out = -grad / np.linalg.norm(grad, axis=1)[:, None]
                 gap[which] = edge_gap(distance, n_out, F, spacing, True)[0] / lam

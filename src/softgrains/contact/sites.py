@@ -93,6 +93,43 @@ class Slots:
         # per body: the span of the impulses its contacts can carry (None: all; coupling.py)
         self.impulse_basis: list = [None] * len(body_ids)
 
+    def restricted(self, chosen: np.ndarray) -> Slots:
+        """The slots of the contacts ``chosen`` (indices, in that order): each body keeps
+        the sites those contacts use (H's rows of them) and its node rows; bodies none of
+        them touches drop out. (The working set of coupling.py: cheaper than new slots from
+        the stencils.)"""
+        d = self.d
+        new = object.__new__(Slots)
+        new.d = d
+        new.a_slot, new.b_slot = self.a_slot[chosen], self.b_slot[chosen]
+        new.a_col, new.b_col = self.a_col[chosen].copy(), self.b_col[chosen].copy()
+        used = np.unique(np.r_[new.a_slot, new.b_slot])
+        used = used[used >= 0]
+        renumber = -np.ones(len(self.bodies) + 1, np.int64)  # (index −1: a wall, kept −1)
+        renumber[used] = np.arange(used.size)
+        new.bodies, new.rows, new.H = [], [], []
+        for old in used:
+            on_a, on_b = new.a_slot == old, new.b_slot == old
+            cols = np.unique(np.r_[new.a_col[on_a], new.b_col[on_b]])
+            new.a_col[on_a] = np.searchsorted(cols, new.a_col[on_a])
+            new.b_col[on_b] = np.searchsorted(cols, new.b_col[on_b])
+            H = self.H[old]
+            new.bodies.append(self.bodies[old])
+            if H is None:  # nodal sites: the rows are the sites
+                new.rows.append(self.rows[old][cols])
+                new.H.append(None)
+            else:
+                new.rows.append(self.rows[old])
+                new.H.append(H[(cols[:, None] * d + np.arange(d)).ravel()])
+        new.a_slot, new.b_slot = renumber[new.a_slot], renumber[new.b_slot]
+        new.k_size = np.array([new.sites(s) for s in range(len(new.bodies))], np.int64)
+        new.k_off = np.r_[0, np.cumsum(new.k_size)][:-1].astype(np.int64)
+        new.response = [None] * len(new.bodies)
+        new.W = [None] * len(new.bodies)
+        new.semidefinite = [False] * len(new.bodies)
+        new.impulse_basis = [None] * len(new.bodies)
+        return new
+
     def sites(self, slot: int) -> int:
         H = self.H[slot]
         return self.rows[slot].size if H is None else H.shape[0] // self.d

@@ -1,0 +1,73 @@
+"""The contact sites' maps (contact/sites.py)."""
+
+import numpy as np
+
+from softgrains.contact.detection import ContactNodes
+from softgrains.contact.problem import relative_velocities, row_impulses
+from softgrains.contact.sites import SideStencils, Slots, subset
+
+
+def _contacts_and_stencils(rng, n: int = 9, d: int = 2):
+    """n point contacts among deformable bodies 0 and 1 and a wall 2, each side's site a
+    random stencil of 3 node rows (of 8) with random d × d blocks; some sites shared."""
+    pairs = np.array([(0, 1), (0, 2), (1, 2)])[rng.integers(0, 3, n)]
+    contacts = ContactNodes(np.arange(n), pairs[:, 0], pairs[:, 1], rng.standard_normal((n, d)),
+                            -np.ones(n, np.int64), -np.ones(n, np.int64))
+    sides = []
+    for side in range(2):
+        rows = rng.integers(0, 8, (n, 3))
+        blocks = rng.standard_normal((n, 3, d, d))
+        key = -1 - np.arange(n) - 100 * side
+        key[n - 1] = key[0]  # the last contact shares the first one's site
+        rows[n - 1], blocks[n - 1] = rows[0], blocks[0]
+        wall = pairs[:, side] == 2
+        rows[wall] = -1
+        sides.append(SideStencils(rows, blocks, key))
+    return contacts, (sides[0], sides[1])
+
+
+def _site_velocities(slots: Slots, fields: dict, d: int) -> np.ndarray:
+    """Each contact's relative velocity v_α − v_β at its sites (walls at rest)."""
+    V = slots.stack(lambda body, rows: fields[body][rows])
+    zero = np.zeros((slots.a_slot.size, d))
+    return relative_velocities(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
+                               slots.k_off, zero, zero, V)
+
+
+def _row_impulses(slots: Slots, P: np.ndarray) -> dict:
+    """The impulses P (per contact) on each body's node rows (8 rows, d)."""
+    Q = row_impulses(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col, slots.k_off, P,
+                     int(slots.k_size.sum()))
+    out = {}
+    for slot, body in enumerate(slots.bodies):
+        on_rows = np.zeros((8, P.shape[1]))
+        on_rows[slots.rows[slot]] = slots.to_rows(slot, Q[slots.span(slot)])
+        out[body] = on_rows
+    return out
+
+
+def test_restricted_slots_are_the_slots_of_the_chosen_contacts():
+    """Slots.restricted (the working set of coupling.py): the same site velocities and the
+    same impulses on the node rows as slots built from the chosen contacts' stencils."""
+    rng = np.random.default_rng(3)
+    d = 2
+    contacts, stencils = _contacts_and_stencils(rng)
+    steps = {0: None, 1: None}
+    everywhere = Slots(steps, contacts, stencils)
+    fields = {b: rng.standard_normal((8, d)) for b in steps}
+    for chosen in (np.array([4, 1, 3]), np.array([0, 8, 2]), np.arange(9)[::-1]):
+        restricted = everywhere.restricted(chosen)
+        direct = Slots(steps, subset(contacts, chosen), tuple(
+            SideStencils(s.rows[chosen], s.blocks[chosen], s.key[chosen]) for s in stencils))
+        np.testing.assert_allclose(_site_velocities(restricted, fields, d),
+                                   _site_velocities(direct, fields, d), rtol=1e-13,
+                                   atol=1e-13)
+        np.testing.assert_allclose(_site_velocities(restricted, fields, d),
+                                   _site_velocities(everywhere, fields, d)[chosen],
+                                   rtol=1e-13, atol=1e-13)
+        P = rng.standard_normal((chosen.size, d))
+        got, expected = _row_impulses(restricted, P), _row_impulses(direct, P)
+        assert restricted.bodies == direct.bodies
+        assert restricted.k_size.tolist() == direct.k_size.tolist()
+        for body in expected:
+            np.testing.assert_allclose(got[body], expected[body], rtol=1e-13, atol=1e-13)
