@@ -1,23 +1,27 @@
 """The contact sites' maps (contact/sites.py)."""
 
 import numpy as np
+import pytest
 
 from softgrains.contact.detection import ContactNodes
 from softgrains.contact.problem import relative_velocities, row_impulses
 from softgrains.contact.sites import SideStencils, Slots, subset
 
 
-def _contacts_and_stencils(rng, n: int = 9, d: int = 2):
-    """n point contacts among deformable bodies 0 and 1 and a wall 2, each side's site a
-    random stencil of 3 node rows (of 8) with random d × d blocks; some sites shared."""
-    pairs = np.array([(0, 1), (0, 2), (1, 2)])[rng.integers(0, 3, n)]
+def _contacts_and_stencils(rng, nodal: bool, n: int = 9, d: int = 2):
+    """n contacts among deformable bodies 0 and 1 and a wall 2 (on either side), each
+    side's site a random stencil of 3 node rows (of 8) with random d × d blocks
+    (``nodal``: a node row of its own, keyed by the row: no site map H); some sites
+    shared."""
+    pairs = np.array([(0, 1), (0, 2), (1, 2), (2, 0)])[rng.integers(0, 4, n)]
     contacts = ContactNodes(np.arange(n), pairs[:, 0], pairs[:, 1], rng.standard_normal((n, d)),
                             -np.ones(n, np.int64), -np.ones(n, np.int64))
     sides = []
     for side in range(2):
-        rows = rng.integers(0, 8, (n, 3))
-        blocks = rng.standard_normal((n, 3, d, d))
-        key = -1 - np.arange(n) - 100 * side
+        rows = rng.integers(0, 8, (n, 1 if nodal else 3))
+        blocks = (np.broadcast_to(np.eye(d), (n, 1, d, d)).copy() if nodal
+                  else rng.standard_normal((n, 3, d, d)))
+        key = rows[:, 0].copy() if nodal else -1 - np.arange(n) - 100 * side
         key[n - 1] = key[0]  # the last contact shares the first one's site
         rows[n - 1], blocks[n - 1] = rows[0], blocks[0]
         wall = pairs[:, side] == 2
@@ -46,16 +50,21 @@ def _row_impulses(slots: Slots, P: np.ndarray) -> dict:
     return out
 
 
-def test_restricted_slots_are_the_slots_of_the_chosen_contacts():
+@pytest.mark.parametrize("nodal", [False, True])
+def test_restricted_slots_are_the_slots_of_the_chosen_contacts(nodal):
     """Slots.restricted (the working set of coupling.py): the same site velocities and the
-    same impulses on the node rows as slots built from the chosen contacts' stencils."""
+    same impulses on the node rows as slots built from the chosen contacts' stencils, for
+    point sites (a site map H) and nodal ones (none), with a body left out or not."""
     rng = np.random.default_rng(3)
     d = 2
-    contacts, stencils = _contacts_and_stencils(rng)
+    contacts, stencils = _contacts_and_stencils(rng, nodal)
     steps = {0: None, 1: None}
     everywhere = Slots(steps, contacts, stencils)
+    assert all((H is None) == nodal for H in everywhere.H)
     fields = {b: rng.standard_normal((8, d)) for b in steps}
-    for chosen in (np.array([4, 1, 3]), np.array([0, 8, 2]), np.arange(9)[::-1]):
+    one_body = np.flatnonzero(np.isin(contacts.alpha, [0, 2]) & np.isin(contacts.beta, [0, 2]))
+    for chosen in (np.array([4, 1, 3]), np.array([0, 8, 2]), np.array([0, 5, 6]),
+                   one_body, np.arange(9)[::-1]):
         restricted = everywhere.restricted(chosen)
         direct = Slots(steps, subset(contacts, chosen), tuple(
             SideStencils(s.rows[chosen], s.blocks[chosen], s.key[chosen]) for s in stencils))

@@ -179,7 +179,9 @@ class ContactDiagnostics:
     correction_work: float = 0.0
     stalled: bool = False  # stopped early by a stall test of Progress
     working_set: int = 0  # the contacts the problem was posed on (WORKING_SET_GAP)
-    working_set_growths: int = 0  # times contacts left out closed and joined it
+    # times the working set grew: contacts left out that closed, corrected end gaps, a
+    # solve redone on every contact
+    working_set_growths: int = 0
 
 
 @dataclass
@@ -391,6 +393,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     member = np.zeros(n, bool)  # the working set (chosen at the first iteration)
     slots = None
     diag.working_set_growths = -1  # (the first choice is not a growth)
+    left_out = None  # a contact left out that closed, when that ended the last iteration
     progress, finished = Progress(), False
     short_gap = None  # (contact, true end gap, floor) when the end-gap check did not settle
     for k in range(1, settings.max_iterations + 1):
@@ -466,7 +469,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             progress.restart()
             continue
         failed_solves += failed
-        if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k == AUTO_TANGENT_ITERATIONS:
+        if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k >= AUTO_TANGENT_ITERATIONS:
             # tangent = "auto": an exact tangent can make W indefinite under compression
             # (the contact problem then has no unique solution) or converge slowly: the
             # projected tangent from here on (this iteration's directions are dropped)
@@ -497,9 +500,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         status[ws] = result.status
         diag.iterations = k
         # the complementarity error at the velocities the bodies now have (the predicted
-        # ones unless the line search shortened a step or the relation is lumped); the
-        # contacts outside the working set carry no impulse: theirs is the velocity error
-        # of a closing gap, −(w_n + b) > 0, on the problem's velocity scale
+        # ones unless the line search shortened a step or the relation is lumped); a
+        # contact outside the working set carries no impulse: its error is the velocity
+        # of a closing gap, −(w_n + b) > 0, on the problem's velocity scale, and one above
+        # the tolerance makes the set grow (the loop's residual is then the larger)
         actual_all = relative_velocities(
             everywhere.a_slot, everywhere.a_col, everywhere.b_slot, everywhere.b_col,
             everywhere.k_off, wall_va, wall_vb,
@@ -514,7 +518,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                                         contacts.normal) + bias))
         speed = max(float(np.linalg.norm(actual, axis=1).max()), velocity_scale(problem))
         missed = max(float(closing.max()), 0.0) / speed if speed > 0.0 else 0.0
-        if missed > settings.tolerance:
+        left_out = int(np.argmax(closing)) if missed > settings.tolerance else None
+        if left_out is not None:
             # a contact left out closes: it and those now near closing join the working
             # set, and the loop goes on with the larger problem
             member |= (closing > -closing_rate) | (closing > settings.tolerance * speed)
@@ -572,9 +577,12 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         diag.converged = False
         if short_gap is not None:  # where the end-of-step gap did not settle
             c = short_gap[0]
+        elif left_out is not None:  # a contact left out of the problem that closed
+            c = left_out
         else:  # where the complementarity error is largest
             c = int(posed[np.argmax(np.linalg.norm(natural_map_residual(
-                problem, P[posed], actual_all[posed]), axis=1))])
+                problem, P[posed], None if actual_all is None else actual_all[posed]),
+                axis=1))])
         a, b = int(contacts.alpha[c]), int(contacts.beta[c])
         name_a, name_b = (names[a], names[b]) if names is not None else (a, b)
         at = (node_position(lattice, contacts.node[c:c + 1])[0] if contacts.position is None
@@ -614,7 +622,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                    "); try a smaller dt, more contact max_iterations"
                    + (", a looser contact tolerance or local_relation = \"delassus\"."
                       if settings.relation == "lumped" else " or a looser contact tolerance.")))
-        diag.problem = problem
+        diag.problem = problem  # (the last iteration's, on its working set)
         if settings.on_failure == "stop":
             raise SimulationError(diag.message, kind="contact", step=step,
                                   body=name_a, other=name_b, contact_problem=problem)

@@ -1,11 +1,13 @@
 """Fixed-radius neighbour search over one body's points by a cell list (Numba kernels).
 
-The points are binned into cubic cells of side ``radius`` (a counting sort); the points
-within ``radius`` of a query point x lie in the 3^d cells around x's cell. The lists come in
-CSR form (ptr, flat), each point once, in the order of the cells and, within a cell, of the
-points' indices. This replaces a k-d tree's ball query (issue 14: no per-step k-d trees),
-whose Python lists cost more than the kernel sums over them (session 29: ~5% of a dense
-compaction step).
+The points are binned into cubic cells of side s ≥ ``radius`` (a counting sort; s a hair
+above the radius, so that a point at the radius is never two cells away by round-off, and
+larger where the cells would outnumber the points many times); the points within
+``radius`` of a query point x lie in the 3^d cells around x's cell. The lists come in CSR
+form (ptr, flat), each point once, in the order of the cells and, within a cell, of the
+points' indices. The kernel surfaces (surfaces.py) use it instead of a k-d tree's ball
+query, whose Python lists cost more than the kernel sums over them (session 29: ~5% of a
+dense compaction step).
 """
 
 from __future__ import annotations
@@ -42,6 +44,10 @@ def _bin(points, origin, side, dims, start, order):
     for p in range(points.shape[0]):
         order[fill[cell[p]]] = p
         fill[cell[p]] += 1
+
+
+SIDE_MARGIN = 1e-9  # the cells' side is at least (1 + this) × the radius
+CELLS_PER_POINT = 8  # ... and large enough for at most this many cells a point (and 64)
 
 
 @njit(cache=True)
@@ -82,8 +88,7 @@ def _search(x, points, origin, side, dims, start, order, radius, ptr, out, count
 
 
 class PointCells:
-    """A body's points binned into cells of side ``radius``, for ball queries of that
-    radius."""
+    """A body's points binned into cells, for ball queries of ``radius``."""
 
     def __init__(self, points: np.ndarray, radius: float) -> None:
         self.points = np.ascontiguousarray(points, float)
@@ -92,16 +97,25 @@ class PointCells:
         lower = self.points.min(axis=0) if len(self.points) else np.zeros(d)
         upper = self.points.max(axis=0) if len(self.points) else np.zeros(d)
         self.origin = lower
-        self.dims = (np.floor((upper - lower) / self.radius).astype(np.int64) + 1)
+        extent = upper - lower
+        side = self.radius * (1.0 + SIDE_MARGIN)
+        most = CELLS_PER_POINT * len(self.points) + 64
+        cells = np.prod(np.floor(extent / side) + 1.0)
+        if cells > most:  # (far-flung points: fewer, larger cells)
+            side *= (cells / most) ** (1.0 / d)
+            while np.prod(np.floor(extent / side) + 1.0) > most:
+                side *= 1.1
+        self.side = side
+        self.dims = np.floor(extent / side).astype(np.int64) + 1
         self.start = np.empty(int(np.prod(self.dims)) + 1, np.int64)
         self.order = np.empty(len(self.points), np.int64)
-        _bin(self.points, self.origin, self.radius, self.dims, self.start, self.order)
+        _bin(self.points, self.origin, self.side, self.dims, self.start, self.order)
 
     def ball(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The points within the radius of each x (‖x − x_q‖ ≤ radius), in CSR form."""
         x = np.ascontiguousarray(x, float)
         ptr = np.zeros(len(x) + 1, np.int64)
-        args = (x, self.points, self.origin, self.radius, self.dims, self.start, self.order,
+        args = (x, self.points, self.origin, self.side, self.dims, self.start, self.order,
                 self.radius)
         _search(*args, ptr, ptr, True)
         np.cumsum(ptr, out=ptr)
