@@ -23,6 +23,7 @@ from __future__ import annotations
 from types import SimpleNamespace
 
 import numpy as np
+from numba import njit
 
 from softgrains.contact.surfaces import (
     KernelSurface,
@@ -34,16 +35,49 @@ from softgrains.contact.surfaces import (
 from softgrains.geometry.shapes import translated
 
 
+@njit(cache=True)
+def _moved(x, F, vol, nodes, N, dN, active_row, u, x_out, F_out, vol_out):
+    """x⁺ = x + Σ_k N_k u_k, G = I + Σ_k u_k ⊗ ∇N_k, F⁺ = G F, V⁺ = det(G) V per point
+    (u_k the displacement at the stencil's active rows, 0 at inactive ones)."""
+    n, ns = N.shape
+    d = x.shape[1]
+    G = np.empty((d, d))
+    for p in range(n):
+        for i in range(d):
+            x_out[p, i] = x[p, i]
+            for j in range(d):
+                G[i, j] = 1.0 if i == j else 0.0
+        for k in range(ns):
+            row = active_row[nodes[p, k]]
+            if row < 0:
+                continue
+            for i in range(d):
+                x_out[p, i] += N[p, k] * u[row, i]
+                for j in range(d):
+                    G[i, j] += u[row, i] * dN[p, k, j]
+        for i in range(d):
+            for j in range(d):
+                total = 0.0
+                for m in range(d):
+                    total += G[i, m] * F[p, m, j]
+                F_out[p, i, j] = total
+        if d == 2:
+            det = G[0, 0] * G[1, 1] - G[0, 1] * G[1, 0]
+        else:
+            det = (G[0, 0] * (G[1, 1] * G[2, 2] - G[1, 2] * G[2, 1])
+                   - G[0, 1] * (G[1, 0] * G[2, 2] - G[1, 2] * G[2, 0])
+                   + G[0, 2] * (G[1, 0] * G[2, 1] - G[1, 1] * G[2, 0]))
+        vol_out[p] = vol[p] * det
+
+
 def moved_points(step) -> SimpleNamespace:
     """A body's points as the step's current displacement u would leave them: x⁺, F⁺, V⁺
     (the G2P update of x, F and V, without the velocities)."""
-    rows = step.active_row[step.nodes]
-    U = np.where(rows[..., None] >= 0, step.u[np.maximum(rows, 0)], 0.0)  # (n, s^d, d)
-    d = U.shape[2]
-    increment = np.eye(d) + np.einsum("pki,pkj->pij", U, step.dN)
-    return SimpleNamespace(x=step.pts.x + np.einsum("pk,pki->pi", step.N, U),
-                           F=increment @ step.pts.F,
-                           vol=step.pts.vol * np.linalg.det(increment))
+    pts = step.pts
+    x, F, vol = np.empty_like(pts.x), np.empty_like(pts.F), np.empty_like(pts.vol)
+    _moved(pts.x, pts.F, pts.vol, step.nodes, step.N, step.dN, step.active_row, step.u,
+           x, F, vol)
+    return SimpleNamespace(x=x, F=F, vol=vol)
 
 
 def end_gaps(sc: SurfaceContacts, steps: dict, walls: dict, spacing: float,
