@@ -327,13 +327,11 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     # every contact's sites (its velocities anywhere); the problem is posed on a working
     # set of them (WORKING_SET_GAP)
     everywhere = Slots(steps, contacts, stencils)
-    wall_va = np.zeros((n, d))
-    wall_vb = np.zeros((n, d))
-    for c in range(n):
-        if everywhere.a_slot[c] < 0:
-            wall_va[c] = walls[int(contacts.alpha[c])][0]
-        if everywhere.b_slot[c] < 0:
-            wall_vb[c] = walls[int(contacts.beta[c])][0]
+    wall_va, wall_vb = np.zeros((n, d)), np.zeros((n, d))  # a kinematic side's velocity
+    for bodies, slot, out in ((contacts.alpha, everywhere.a_slot, wall_va),
+                              (contacts.beta, everywhere.b_slot, wall_vb)):
+        for wall in np.unique(bodies[slot < 0]):
+            out[(slot < 0) & (bodies == wall)] = walls[int(wall)][0]
     k_total = int(everywhere.k_size.sum())
     # the gap predicted at the end of the step by the integrator's own displacement,
     # g + Δt[(1 − θ) w_n^n + θ w_n^{n+1}] ≥ 0  ⇔  w_n^{n+1} + (g + (1 − θ)Δt w_n^n)/(θΔt) ≥ 0
