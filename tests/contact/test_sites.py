@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from softgrains.contact.detection import ContactNodes
-from softgrains.contact.problem import relative_velocities, row_impulses
+from softgrains.contact.problem import row_impulses
 from softgrains.contact.sites import SideStencils, Slots, subset
 
 
@@ -32,10 +32,9 @@ def _contacts_and_stencils(rng, nodal: bool, n: int = 9, d: int = 2):
 
 def _site_velocities(slots: Slots, fields: dict, d: int) -> np.ndarray:
     """Each contact's relative velocity v_α − v_β at its sites (walls at rest)."""
-    V = slots.stack(lambda body, rows: fields[body][rows])
     zero = np.zeros((slots.a_slot.size, d))
-    return relative_velocities(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
-                               slots.k_off, zero, zero, V)
+    return slots.relative_velocities(slots.stack(lambda body, rows: fields[body][rows]),
+                                     zero, zero)
 
 
 def _row_impulses(slots: Slots, P: np.ndarray) -> dict:

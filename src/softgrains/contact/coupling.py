@@ -67,7 +67,6 @@ from softgrains.contact.local_law import SLIP, STICK
 from softgrains.contact.problem import (
     ContactProblem,
     natural_map_residual,
-    relative_velocities,
     residual_norm,
     row_impulses,
     velocity_scale,
@@ -336,10 +335,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     # the gap predicted at the end of the step by the integrator's own displacement,
     # g + Δt[(1 − θ) w_n^n + θ w_n^{n+1}] ≥ 0  ⇔  w_n^{n+1} + (g + (1 − θ)Δt w_n^n)/(θΔt) ≥ 0
     theta = _velocity_weight(next(iter(steps.values())).settings)
-    start = np.einsum("ci,ci->c", relative_velocities(
-        everywhere.a_slot, everywhere.a_col, everywhere.b_slot, everywhere.b_col,
-        everywhere.k_off, wall_va, wall_vb,
-        everywhere.stack(lambda body, rows: steps[body].v_n[rows])), contacts.normal)
+    start = np.einsum("ci,ci->c", everywhere.relative_velocities(
+        everywhere.stack(lambda body, rows: steps[body].v_n[rows]), wall_va, wall_vb),
+        contacts.normal)
     # a contact that carried an impulse at the previous step ended it closed: its gap is
     # the integrator's prediction, 0, unless the fresh estimate finds an overlap. A fresh
     # estimate > 0 there is mostly its own scatter (points entering or leaving the column),
@@ -390,7 +388,6 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     closing_rate = WORKING_SET_GAP * lattice.h / (theta * dt)
     member = np.zeros(n, bool)  # the working set (chosen at the first iteration)
     slots = None
-    diag.working_set_growths = -1  # (the first choice is not a growth)
     left_out = None  # a contact left out that closed, when that ended the last iteration
     progress, finished = Progress(), False
     short_gap = None  # (contact, true end gap, floor) when the end-gap check did not settle
@@ -401,16 +398,14 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         if slots is None:
             # the working set: the contacts that carry an impulse, and those the bodies'
             # Newton directions bring within WORKING_SET_GAP of closing (at least one)
-            V_all = everywhere.stack(lambda body, rows, du=du: _predicted_velocity(
-                steps[body], rows, du.get(body)))
-            near = _closing(everywhere, contacts.normal, wall_va, wall_vb, V_all, bias,
-                            closing_rate)
+            w_all = everywhere.relative_velocities(everywhere.stack(
+                lambda body, rows, du=du: _predicted_velocity(steps[body], rows,
+                                                              du.get(body))), wall_va, wall_vb)
+            near = np.einsum("ci,ci->c", w_all, contacts.normal) + bias < closing_rate
             if not (member | near).any():
                 near[int(np.argmin(bias))] = True
             member |= near | np.any(P != 0.0, axis=1)
-            slots = _working_slots(everywhere, contacts.normal, member, mu)
-            ws = np.flatnonzero(member)
-            diag.working_set_growths += 1
+            slots, ws = _working_slots(everywhere, contacts.normal, member, mu)
         psd = _update_compliances(steps, slots, set(du), delassus)
         if not psd and delassus:
             # tangent = "auto": a body whose W_s is indefinite (its exact tangent under
@@ -461,8 +456,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # Tresca fixed point that stalled at 6-8e-4, converged on all the contacts in
             # 49-61 iterations, as without the working set; left, each cost a retried step)
             member[:] = True
-            slots = _working_slots(everywhere, contacts.normal, member, mu)
-            ws = np.flatnonzero(member)
+            slots, ws = _working_slots(everywhere, contacts.normal, member, mu)
             diag.working_set_growths += 1
             progress.restart()
             continue
@@ -502,10 +496,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         # contact outside the working set carries no impulse: its error is the velocity
         # of a closing gap, −(w_n + b) > 0, on the problem's velocity scale, and one above
         # the tolerance makes the set grow (the loop's residual is then the larger)
-        actual_all = relative_velocities(
-            everywhere.a_slot, everywhere.a_col, everywhere.b_slot, everywhere.b_col,
-            everywhere.k_off, wall_va, wall_vb,
-            everywhere.stack(lambda body, rows: steps[body].node_velocity(rows)))
+        actual_all = everywhere.relative_velocities(
+            everywhere.stack(lambda body, rows: steps[body].node_velocity(rows)),
+            wall_va, wall_vb)
         actual = actual_all[ws]
         diag.residual = residual_norm(problem, P[ws], actual, floor)
         # a body's residual need not be finer than the impulses it carries (same units)
@@ -521,8 +514,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # a contact left out closes: it and those now near closing join the working
             # set, and the loop goes on with the larger problem
             member |= (closing > -closing_rate) | (closing > settings.tolerance * speed)
-            slots = _working_slots(everywhere, contacts.normal, member, mu)
-            ws = np.flatnonzero(member)
+            slots, ws = _working_slots(everywhere, contacts.normal, member, mu)
             diag.working_set_growths += 1
             diag.residual = max(diag.residual, missed)
             progress.restart()
@@ -561,8 +553,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             progress.restart()
             if (corrected & ~member).any():  # a corrected contact joins the working set
                 member |= corrected
-                slots = _working_slots(everywhere, contacts.normal, member, mu)
-                ws = np.flatnonzero(member)
+                slots, ws = _working_slots(everywhere, contacts.normal, member, mu)
                 diag.working_set_growths += 1
         else:
             ratios = [diag.residual / settings.tolerance] + [
@@ -635,23 +626,15 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     return ContactState(contacts, P, status, estimated), diag
 
 
-def _closing(slots: Slots, normal: np.ndarray, wall_va: np.ndarray, wall_vb: np.ndarray,
-             V: np.ndarray, bias: np.ndarray, rate: float) -> np.ndarray:
-    """The contacts whose gap the site velocities V bring within ``rate`` of closing:
-    b + w_n < rate (w the relative velocities, in the contacts' order)."""
-    w = relative_velocities(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
-                            slots.k_off, wall_va, wall_vb, V)
-    return np.einsum("ci,ci->c", w, normal) + bias < rate
-
-
 def _working_slots(everywhere: Slots, normal: np.ndarray, member: np.ndarray,
-                   mu: np.ndarray) -> Slots:
-    """The slots (sites, maps, compliances to come) of the contacts in ``member``."""
+                   mu: np.ndarray) -> tuple[Slots, np.ndarray]:
+    """The slots (sites, maps, compliances to come) of the contacts in ``member``, and
+    their indices."""
     chosen = np.flatnonzero(member)
     slots = everywhere.restricted(chosen)
     slots.impulse_basis = [_impulse_basis(slots, slot, normal[chosen], mu[chosen])
                            for slot in range(len(slots.bodies))]
-    return slots
+    return slots, chosen
 
 
 def _update_compliances(steps: dict, slots: Slots, fresh: set, delassus: bool) -> bool:
@@ -765,8 +748,7 @@ def _contact_work(steps: dict, slots: Slots, P: np.ndarray, wall_va: np.ndarray,
     so that the deformable bodies receive W_wall − D from the contacts. (D > 0: energy
     taken out, e.g. by friction; D < 0: put in, e.g. by overlap removal.)"""
     U = slots.stack(lambda body, rows: steps[body].u[rows])
-    relative = relative_velocities(slots.a_slot, slots.a_col, slots.b_slot, slots.b_col,
-                                   slots.k_off, wall_va * dt, wall_vb * dt, U)
+    relative = slots.relative_velocities(U, wall_va * dt, wall_vb * dt)
     wall_b, wall_a = slots.b_slot < 0, slots.a_slot < 0
     work = float(np.sum(P[wall_b] * wall_vb[wall_b]) - np.sum(P[wall_a] * wall_va[wall_a]))
     return work, -float(np.sum(P * relative)) / dt

@@ -20,6 +20,7 @@ import scipy.sparse as sp
 
 from softgrains.contact.detection import ContactNodes, node_position
 from softgrains.contact.patches import aggregate, group
+from softgrains.contact.problem import relative_velocities
 from softgrains.contact.surfaces import (
     SurfaceContacts,
     merge,
@@ -145,6 +146,13 @@ class Slots:
                                (H @ value(body, rows).ravel()).reshape(-1, self.d)
                                for body, rows, H in zip(self.bodies, self.rows, self.H,
                                                         strict=True)])
+
+    def relative_velocities(self, V: np.ndarray, wall_va: np.ndarray, wall_vb: np.ndarray
+                            ) -> np.ndarray:
+        """w_c = v^α − v^β at each contact from the site velocities V (:meth:`stack`); a
+        kinematic side moves at its wall velocity (wall_va, wall_vb per contact)."""
+        return relative_velocities(self.a_slot, self.a_col, self.b_slot, self.b_col,
+                                   self.k_off, wall_va, wall_vb, V)
 
     def to_rows(self, slot: int, q: np.ndarray) -> np.ndarray:
         """Impulses q (sites, d) of body ``slot`` as impulses on its node rows, Hᵀ q."""
