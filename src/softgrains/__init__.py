@@ -6,9 +6,13 @@
     sim.run()
 """
 
-from softgrains.case import Case, load_case
-from softgrains.errors import CaseError, SimulationError
-from softgrains.simulation import Simulation
+from softgrains.threads import set_wait_policy
+
+set_wait_policy()  # before any parallel kernel loads the OpenMP runtime (threads.py)
+
+from softgrains.case import Case, load_case  # noqa: E402
+from softgrains.errors import CaseError, SimulationError  # noqa: E402
+from softgrains.simulation import Simulation  # noqa: E402
 
 __version__ = "0.1.0"
 __all__ = ["Case", "CaseError", "Simulation", "SimulationError", "__version__", "load_case", "run"]

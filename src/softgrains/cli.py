@@ -26,6 +26,7 @@ from softgrains.errors import (
     CaseError,
     SimulationError,
 )
+from softgrains.threads import PARALLEL_MIN_POINTS
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -289,7 +290,9 @@ def _info(args: argparse.Namespace) -> int:
     lines = [f"softgrains {_version('softgrains')}"]
     lines.append(f"python {platform.python_version()} ({sys.executable})")
     lines += [f"{name} {_version(name)}" for name in ("numpy", "scipy", "numba", "pydantic")]
-    lines.append(f"numba threading layer: {_threading_layer()}, threads: {numba.get_num_threads()}")
+    lines.append(f"numba threading layer: {_threading_layer()}, threads: {numba.get_num_threads()}"
+                 f", OpenMP wait policy: {os.environ.get('OMP_WAIT_POLICY', 'default')} (kernels"
+                 f" over fewer than {PARALLEL_MIN_POINTS} points on one thread)")
     usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     lines.append(f"CPUs: {os.cpu_count()} ({usable} usable by this process)")
     lines.append(f"GPU: {_gpu()}")

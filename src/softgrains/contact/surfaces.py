@@ -50,6 +50,7 @@ from numba import njit
 from softgrains.contact.neighbours import PointCells
 from softgrains.geometry import Disk, Rectangle
 from softgrains.grid.shape_functions import compute_stencils, stencil_width
+from softgrains.threads import threads_for
 
 _trapezoid = getattr(np, "trapezoid", None) or np.trapz  # NumPy ≥ 2 / 1.26
 FIELD_FLOOR = 1e-9  # a smoothed volume fraction below this does not reach the point
@@ -254,7 +255,9 @@ class KernelSurface:
         s = stencil_width(kind)
         base = np.empty((n, d), np.int64)
         N = np.empty((n, s**d))
-        compute_stencils(x, lattice.node_origin, lattice.h, kind, base, N, np.empty((n, s**d, d)))
+        with threads_for(n):
+            compute_stencils(x, lattice.node_origin, lattice.h, kind, base, N,
+                             np.empty((n, s**d, d)))
         rows, weights = np.empty((n, s**d), np.int64), np.empty((n, s**d))
         _stencil_rows(base, N, step.box.lower, step.box.shape, step.active_row, rows, weights)
         _first_moment_correction(x, base, lattice.node_origin, lattice.h, weights)

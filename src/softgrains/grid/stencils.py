@@ -11,6 +11,7 @@ from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice, NodeBox
 from softgrains.grid.shape_functions import compute_stencils, stencil_width
 from softgrains.grid.transfers import local_node_indices
+from softgrains.threads import threads_for
 
 
 @dataclass(frozen=True)
@@ -29,7 +30,8 @@ def body_stencils(lattice: Lattice, shape_kind: int, x: np.ndarray, body: str = 
     base = np.empty((n, d), dtype=np.int64)
     N = np.empty((n, s**d))
     dN = np.empty((n, s**d, d))
-    compute_stencils(x, lattice.node_origin, lattice.h, shape_kind, base, N, dN)
+    with threads_for(n):
+        compute_stencils(x, lattice.node_origin, lattice.h, shape_kind, base, N, dN)
     out = (base < 0) | (base + s > lattice.n_nodes)
     if out.any():
         p = int(np.argwhere(out.any(axis=1))[0, 0])
@@ -40,5 +42,6 @@ def body_stencils(lattice: Lattice, shape_kind: int, x: np.ndarray, body: str = 
             point=p)
     box = NodeBox.of_stencils(base, s)
     nodes = np.empty((n, s**d), dtype=np.int64)
-    local_node_indices(base, box.lower, box.strides(), s, nodes)
+    with threads_for(n):
+        local_node_indices(base, box.lower, box.strides(), s, nodes)
     return BodyStencils(box, nodes, N, dN)

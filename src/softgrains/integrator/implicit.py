@@ -58,6 +58,7 @@ from softgrains.integrator.linear_solvers import (
     factorize,
     mirrored_negative_modes,
 )
+from softgrains.threads import threads_for
 
 ACTIVE_MASS_FRACTION = 1e-4  # lighter nodes (fraction of the heaviest point) are removed
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
@@ -258,8 +259,9 @@ class BodyStep:
         self.vol_n = pts.vol.copy()
         if self.consistent:
             self.m_blocks = np.empty(self.indices.size)
-            gather_consistent_mass(self.ptr, self.entries, N, pts.mass, self.slot,
-                                   stepper.codes, self.m_blocks)
+            with threads_for(nodes.shape[0]):
+                gather_consistent_mass(self.ptr, self.entries, N, pts.mass, self.slot,
+                                       stepper.codes, self.m_blocks)
             self._Mu = np.empty((n_act, d))
 
         # R(u) = c_m M u − b − s f^int(u) = ∇Π(u),  Π(u) = ½ c_m uᵀMu − b·u + s W(u)
@@ -348,22 +350,23 @@ class BodyStep:
     def mass_times(self, u: np.ndarray) -> np.ndarray:
         if not self.consistent:
             return self.m * u
-        block_scalar_matvec(self.indptr, self.indices, self.m_blocks, u, self._Mu)
+        with threads_for(self.nodes.shape[0]):
+            block_scalar_matvec(self.indptr, self.indices, self.m_blocks, u, self._Mu)
         return self._Mu
 
     def internal_force(self, u: np.ndarray, want_tangent: bool):
         """f^int(u) on the active nodes (and K in ``data`` if want_tangent); min J, W(u)."""
         self.u_box[self.active] = u
         pts = self.pts
-        jmin, w_int = point_stresses(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n,
-                                     pts.law, pts.lam, pts.mu, self.Pv, self.Av, want_tangent,
-                                     self.n_chunks,
-                                     self.projected)
-        if jmin > 0.0:
-            gather_forces(self.ptr, self.entries, self.dN, self.Pv, self.f_int)
-            if want_tangent:
-                gather_tangent(self.ptr, self.entries, self.dN, self.Av, self.slot,
-                               self.stepper.codes, self.data)
+        with threads_for(self.nodes.shape[0]):
+            jmin, w_int = point_stresses(self.nodes, self.dN, self.u_box, self.F_n,
+                                         self.vol_n, pts.law, pts.lam, pts.mu, self.Pv,
+                                         self.Av, want_tangent, self.n_chunks, self.projected)
+            if jmin > 0.0:
+                gather_forces(self.ptr, self.entries, self.dN, self.Pv, self.f_int)
+                if want_tangent:
+                    gather_tangent(self.ptr, self.entries, self.dN, self.Av, self.slot,
+                                   self.stepper.codes, self.data)
         return self.f_int.copy(), jmin, w_int
 
     def residual(self, u: np.ndarray, f_int: np.ndarray) -> np.ndarray:
@@ -663,9 +666,11 @@ class BodyStep:
             v_new[active] = self.node_velocity(np.arange(u.shape[0]))
         params = np.array([dt, st.flip, st.theta, st.beta, st.gamma])
         pts = self.pts
-        jmin = grid_to_particles(self.nodes, self.N, self.dN, u_box, v_old, v_new, a_new,
-                                 update, params, pts.law, pts.lam, pts.mu, pts.vol0, pts.x,
-                                 pts.v, pts.a, pts.F, pts.sigma, pts.vol, self.n_chunks)
+        with threads_for(self.nodes.shape[0]):
+            jmin = grid_to_particles(self.nodes, self.N, self.dN, u_box, v_old, v_new, a_new,
+                                     update, params, pts.law, pts.lam, pts.mu, pts.vol0,
+                                     pts.x, pts.v, pts.a, pts.F, pts.sigma, pts.vol,
+                                     self.n_chunks)
         if not jmin > 0.0:
             J = np.linalg.det(pts.F)
             bad = np.flatnonzero(~(J > 0.0))

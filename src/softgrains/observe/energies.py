@@ -8,6 +8,7 @@ import numpy as np
 from numba import njit, prange
 
 from softgrains.materials.dispatch import strain_energy as _w
+from softgrains.threads import threads_for
 
 
 def kinetic_energy(mass: np.ndarray, v: np.ndarray) -> float:
@@ -22,5 +23,6 @@ def _strain_energies(law, F, lam, mu, vol0, out):
 
 def strain_energy(law, F, lam, mu, vol0) -> float:
     out = np.empty(F.shape[0])
-    _strain_energies(law, F, lam, mu, vol0, out)
+    with threads_for(F.shape[0]):
+        _strain_energies(law, F, lam, mu, vol0, out)
     return float(out.sum())

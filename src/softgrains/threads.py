@@ -1,0 +1,54 @@
+"""How softgrains uses threads: a wait policy that behaves on a busy machine, and one thread
+for kernels too small to share (issue 14, item 5; benchmarks/threads_busy.py).
+
+Numba's parallel kernels run on its OpenMP layer (GNU libgomp from the pip wheels). At its
+default wait policy a thread that finishes its share spins for up to ~300k iterations
+before sleeping; on a machine whose cores are busy with other processes a kernel then waits
+for a descheduled partner, and the dense compaction ran 3× slower with 2 threads than with
+1 (1.81 against 0.61 s a step with one competing process per core, 2026-12-05).
+``OMP_WAIT_POLICY=PASSIVE`` makes the waiting threads sleep at once; it is set when the
+package is imported, unless the user has set it (libgomp reads it when Numba first loads
+it, so a program that ran an OpenMP library before importing softgrains keeps its policy).
+
+A parallel kernel's fork and join cost 5–50 µs; a grain of the compaction (~300 points at
+D/h 10) takes ~300 µs for its internal forces and tangent, and gains nothing from a second
+thread. :func:`threads_for` runs kernels over fewer than :data:`PARALLEL_MIN_POINTS` points
+on the calling thread alone.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numba
+
+# below this many points a kernel runs on one thread (measured on this 2-core machine:
+# internal forces and tangent at 316 points 1.04× faster on 2 threads, at 1264 points 1.3–2×)
+PARALLEL_MIN_POINTS = 1000
+
+
+def set_wait_policy() -> None:
+    """Idle OpenMP threads sleep instead of spinning (OMP_WAIT_POLICY=PASSIVE), unless the
+    environment says otherwise."""
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+
+class threads_for:  # noqa: N801 (used as a context manager, like a function)
+    """``with threads_for(n_points): kernel(...)``: the Numba kernels inside run on one
+    thread when ``n_points`` < PARALLEL_MIN_POINTS, else on the threads set for the run."""
+
+    __slots__ = ("serial", "previous")
+
+    def __init__(self, n_points: int) -> None:
+        self.serial = n_points < PARALLEL_MIN_POINTS
+        self.previous = 0
+
+    def __enter__(self) -> None:
+        if self.serial:
+            self.previous = numba.get_num_threads()
+            if self.previous > 1:
+                numba.set_num_threads(1)
+
+    def __exit__(self, *exc) -> None:
+        if self.serial and self.previous > 1:
+            numba.set_num_threads(self.previous)
