@@ -3,9 +3,10 @@ process per core (issue 14, item 5; softgrains/threads.py).
 
 Two thread set-ups are compared, each in a fresh process:
 - ``now``: softgrains' defaults (OMP_WAIT_POLICY=PASSIVE set at import, kernels over fewer
-  than PARALLEL_MIN_POINTS points on one thread);
-- ``before``: libgomp's default wait policy (spin, then sleep) and every kernel on all
-  threads, as before session 30.
+  than PARALLEL_MIN_POINTS points on one thread, the coupling loop's bodies shared among
+  the threads);
+- ``before``: libgomp's default wait policy (spin, then sleep), every kernel on all
+  threads and the bodies one after the other, as before session 30.
 Cases: the bar example (one body of 100 points), one neo-Hookean disk at D/h 40 (5k points,
 where threads pay) and the frictional compaction's first steps (30 grains of ~300 points).
 Run:  python benchmarks/threads_busy.py [--steps-scale 1.0]
@@ -35,8 +36,12 @@ def child(case: str, steps: int, setup: str) -> None:
     import softgrains.threads
 
     if setup == "before":
+        import softgrains.contact.coupling
+
         del os.environ["OMP_WAIT_POLICY"]  # before libgomp is loaded by a first kernel
         softgrains.threads.PARALLEL_MIN_POINTS = 0
+        softgrains.contact.coupling.over_bodies = lambda function, items: [
+            function(x) for x in items]
     import numba
 
     from softgrains.case import load_case

@@ -6,9 +6,10 @@ import sys
 
 import numba
 import numpy as np
+import pytest
 
 from softgrains.grid.shape_functions import SHAPE_FUNCTIONS, compute_stencils
-from softgrains.threads import PARALLEL_MIN_POINTS, threads_for
+from softgrains.threads import PARALLEL_MIN_POINTS, over_bodies, threads_for
 
 POLICY = "import softgrains, os; print(os.environ.get('OMP_WAIT_POLICY'))"
 
@@ -60,3 +61,23 @@ def test_a_kernel_gives_the_same_values_on_one_thread_and_on_all():
 
     for serial, parallel in zip(stencils(1), stencils(n), strict=True):
         np.testing.assert_array_equal(serial, parallel)
+
+
+def test_bodies_shared_among_threads_give_the_serial_results_in_order():
+    items = list(range(40))
+    before = numba.get_num_threads()
+    results = over_bodies(lambda i: (i, numba.get_num_threads()), items)
+    assert [i for i, _ in results] == items
+    if before > 1:  # the workers run their kernels on one thread each
+        assert {threads for _, threads in results} == {1}
+    assert numba.get_num_threads() == before
+
+
+def test_the_first_failing_body_in_order_is_reported():
+    def work(i):
+        if i in (7, 23):
+            raise ValueError(f"body {i}")
+        return i
+
+    with pytest.raises(ValueError, match="body 7"):
+        over_bodies(work, range(30))

@@ -13,14 +13,22 @@ it, so a program that ran an OpenMP library before importing softgrains keeps it
 A parallel kernel's fork and join cost 5–50 µs; a grain of the compaction (~300 points at
 D/h 10) takes ~300 µs for its internal forces and tangent, and gains nothing from a second
 thread. :func:`threads_for` runs kernels over fewer than :data:`PARALLEL_MIN_POINTS` points
-on the calling thread alone.
+on the calling thread alone. Instead, :func:`over_bodies` shares the bodies of a coupling
+iteration among the run's threads: each body's Newton matrix, LU and compliance columns are
+LAPACK calls that release the GIL.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable, Iterable
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
 import numba
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 # below this many points a kernel runs on one thread (measured on this 2-core machine:
 # internal forces and tangent at 316 points 1.04× faster on 2 threads, at 1264 points 1.3–2×)
@@ -52,3 +60,22 @@ class threads_for:  # noqa: N801 (used as a context manager, like a function)
     def __exit__(self, *exc) -> None:
         if self.serial and self.previous > 1:
             numba.set_num_threads(self.previous)
+
+
+_pools: dict[int, ThreadPoolExecutor] = {}
+
+
+def over_bodies(function: Callable[[T], R], items: Iterable[T]) -> list[R]:
+    """``[function(x) for x in items]`` with the items shared among the run's Numba threads
+    (``numba.get_num_threads()`` Python threads, each running its kernels on one thread):
+    for per-body work that is independent between bodies and spends its time in calls that
+    release the GIL. The results come in the items' order and are those of the serial loop;
+    the first exception in that order is raised (later items may have run)."""
+    items = list(items)
+    threads = numba.get_num_threads()
+    if threads < 2 or len(items) < 2:
+        return [function(x) for x in items]
+    if threads not in _pools:
+        _pools[threads] = ThreadPoolExecutor(threads, thread_name_prefix="softgrains-body",
+                                             initializer=numba.set_num_threads, initargs=(1,))
+    return list(_pools[threads].map(function, items))

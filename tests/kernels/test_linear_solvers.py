@@ -79,3 +79,14 @@ def test_mirrored_negative_modes_flip_only_the_negative_eigenvalues():
     np.testing.assert_allclose(mirrored @ solver.solve(mirrored, b, np.zeros(0, np.int64)), b,
                                atol=1e-10)
     assert solver.last_method == "direct"
+
+
+def test_a_block_sparse_matrix_is_written_densely_as_scipy_does():
+    """The Newton matrices are BSR with d × d blocks; ``dense`` writes them without SciPy's
+    conversion (a kernel that releases the GIL), repeated blocks summed as SciPy sums them."""
+    rng = np.random.default_rng(5)
+    A = sp.bsr_matrix(sp.random(12, 12, density=0.3, random_state=6).toarray(), blocksize=(2, 2))
+    np.testing.assert_array_equal(linear_solvers.dense(A), A.toarray())
+    blocks = rng.standard_normal((3, 2, 2))
+    repeated = sp.bsr_matrix((blocks, np.array([0, 0, 1]), np.array([0, 2, 3])), shape=(4, 4))
+    np.testing.assert_allclose(linear_solvers.dense(repeated), repeated.toarray(), rtol=1e-15)

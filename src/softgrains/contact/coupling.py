@@ -76,6 +76,7 @@ from softgrains.contact.solvers import ContactSolverOptions, solve
 from softgrains.contact.surfaces import select
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
+from softgrains.threads import over_bodies
 
 IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
 AUTO_TANGENT_ITERATIONS = 10  # tangent = "auto": projected after this many iterations
@@ -393,8 +394,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     short_gap = None  # (contact, true end gap, floor) when the end-gap check did not settle
     for k in range(1, settings.max_iterations + 1):
         # the Newton direction of every body not converged, with the current impulses
-        du = {i: b.newton_direction(direct=delassus and i in in_contact)
-              for i, b in steps.items() if not done[i]}
+        moving = [i for i in steps if not done[i]]
+        du = dict(zip(moving, over_bodies(
+            lambda i: steps[i].newton_direction(direct=delassus and i in in_contact), moving),
+            strict=True))
         if slots is None:
             # the working set: the contacts that carry an impulse, and those the bodies'
             # Newton directions bring within WORKING_SET_GAP of closing (at least one)
@@ -642,14 +645,19 @@ def _update_compliances(steps: dict, slots: Slots, fresh: set, delassus: bool) -
     Newton matrix changed (the bodies ``fresh``); whether every W_s is positive
     semidefinite on the impulses its contacts can carry (``_impulse_basis``; a projected
     tangent's is: A is SPD; an exact one's is checked)."""
-    for slot, body in enumerate(slots.bodies):
-        if not (slots.W[slot] is None or (delassus and body in fresh)):
-            continue
-        H = slots.H[slot] if delassus else None
-        slots.response[slot], W = steps[body].contact_response(slots.rows[slot], delassus, H)
-        slots.W[slot] = W if H is not None else slots.compliance(slot, W)
-        slots.semidefinite[slot] = (not delassus or steps[body].projected
-                                    or _semidefinite(slots.W[slot], slots.impulse_basis[slot]))
+    def update(slot: int) -> tuple[np.ndarray | None, np.ndarray, bool]:
+        body, H = slots.bodies[slot], slots.H[slot] if delassus else None
+        response, W = steps[body].contact_response(slots.rows[slot], delassus, H)
+        W = W if H is not None else slots.compliance(slot, W)
+        return response, W, (not delassus or steps[body].projected
+                             or _semidefinite(W, slots.impulse_basis[slot]))
+
+    stale = [slot for slot, body in enumerate(slots.bodies)
+             if slots.W[slot] is None or (delassus and body in fresh)]
+    for slot, (response, W, semidefinite) in zip(stale, over_bodies(update, stale),
+                                                  strict=True):
+        slots.response[slot], slots.W[slot], slots.semidefinite[slot] = (response, W,
+                                                                         semidefinite)
     return all(slots.semidefinite)
 
 

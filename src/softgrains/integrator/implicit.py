@@ -55,6 +55,7 @@ from softgrains.integrator.assembly import (
 from softgrains.integrator.linear_solvers import (
     DENSE_LIMIT,
     LinearSolver,
+    dense,
     factorize,
     mirrored_negative_modes,
 )
@@ -343,7 +344,7 @@ class BodyStep:
         A = self.newton_matrix()
         if self._mirrored:
             mirrored = mirrored_negative_modes(A, self.m.ravel())
-            return A.toarray() if mirrored is None else mirrored
+            return dense(A) if mirrored is None else mirrored
         return A
 
     # -- the step equations ------------------------------------------------------------

@@ -11,12 +11,13 @@
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from numba import njit
+from scipy.linalg.lapack import dgetrf as _GETRF
+from scipy.linalg.lapack import dgetrs as _GETRS
 
 CG_MAX_ITERATIONS = 200
 CG_RELATIVE_TOLERANCE = 1e-10
@@ -28,20 +29,45 @@ DENSE_LIMIT = 600
 NEGATIVE_MODE = 1e-12  # an eigenvalue below −this × max diag is a negative mode
 
 
+@njit(cache=True, nogil=True)
+def _bsr_to_dense(indptr, indices, data, out):
+    """out = the block-sparse matrix (indptr, indices, data[k] d × d) written densely
+    (repeated blocks summed)."""
+    d = data.shape[1]
+    out[:] = 0.0
+    for i in range(indptr.size - 1):
+        for k in range(indptr[i], indptr[i + 1]):
+            j = indices[k]
+            for a in range(d):
+                for b in range(d):
+                    out[i * d + a, j * d + b] += data[k, a, b]
+
+
+def dense(A: sp.spmatrix | np.ndarray) -> np.ndarray:
+    """A as a dense array (a BSR matrix by a kernel that releases the GIL)."""
+    if isinstance(A, sp.bsr_matrix):
+        out = np.empty(A.shape)
+        _bsr_to_dense(A.indptr, A.indices, A.data, out)
+        return out
+    return A.toarray() if sp.issparse(A) else A
+
+
 class DenseLU:
-    """A dense LU factorization with SuperLU's ``solve(b)`` (b a vector or a matrix)."""
+    """A dense LU factorization with SuperLU's ``solve(b)`` (b a vector or a matrix): LAPACK's
+    getrf and getrs called directly (no warnings machinery, which is not thread-safe: bodies
+    are factorised on several threads, threads.over_bodies)."""
 
     def __init__(self, A: sp.spmatrix | np.ndarray) -> None:
-        dense = A.toarray() if sp.issparse(A) else A
-        with warnings.catch_warnings():  # a singular A raises below, as SuperLU does
-            warnings.simplefilter("ignore", sla.LinAlgWarning)
-            lu, self.pivots = sla.lu_factor(dense, check_finite=False)
-        if not np.all(np.isfinite(lu)) or np.any(np.diagonal(lu) == 0.0):
+        lu, self.pivots, info = _GETRF(np.array(dense(A), order="F"), overwrite_a=True)
+        if info > 0 or not np.all(np.isfinite(lu)):
             raise RuntimeError("Factor is exactly singular")
         self.lu = lu
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        return sla.lu_solve((self.lu, self.pivots), b, check_finite=False)
+        x, info = _GETRS(self.lu, self.pivots, b)
+        if info != 0:
+            raise RuntimeError(f"LAPACK getrs failed (info {info})")
+        return x
 
 
 def factorize(A: sp.spmatrix | np.ndarray):
@@ -57,8 +83,8 @@ def mirrored_negative_modes(A: sp.spmatrix, m: np.ndarray) -> np.ndarray | None:
     M = diag(m) > 0, A symmetric: the negative modes mirrored, the others unchanged (from
     B = M^-½ A M^-½ = Σ λ u uᵀ, v = M^-½ u). None where A has no negative mode."""
     root = np.sqrt(m)
-    dense = A.toarray()
-    B = dense / root[:, None] / root[None, :]
+    full = dense(A)
+    B = full / root[:, None] / root[None, :]
     B = 0.5 * (B + B.T)
     # below round-off of B's scale: a zero eigenvalue is no negative mode
     below = -NEGATIVE_MODE * float(np.abs(np.diagonal(B)).max(initial=0.0))
@@ -66,7 +92,7 @@ def mirrored_negative_modes(A: sp.spmatrix, m: np.ndarray) -> np.ndarray | None:
     if lam.size == 0:
         return None
     MV = U * root[:, None]  # M v = M^½ u
-    return dense + (MV * (-2.0 * lam)) @ MV.T
+    return full + (MV * (-2.0 * lam)) @ MV.T
 
 
 def _block_jacobi(A: sp.bsr_matrix, diag_slot: np.ndarray) -> sp.bsr_matrix:
