@@ -60,7 +60,7 @@ def traced_wall_contacts(pairs, steps, shapes, spacing, reach):
         x = own.step.pts.x
         distance, n_out = surfaces.shape_distance(shapes[wall], x)
         near = np.flatnonzero(distance < reach + spacing)
-        value, grad, _ = own.field(x[near])
+        value, grad = own.field(x[near])
         inside, _ = surfaces.calibrated_distance(value, grad, own.radius)
         gap, _ = surfaces.edge_gap(distance[near], n_out[near], own.step.pts.F[near],
                                    spacing, "square" not in VARIANT)

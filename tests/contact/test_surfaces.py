@@ -50,8 +50,8 @@ def test_surface_rate_is_the_time_derivative_of_the_smoothed_field(shape_functio
     surface = surfaces.KernelSurface(step)
     angle = np.linspace(0.0, 2.0 * np.pi, 13)[:-1]
     x = np.c_[1.013 + 0.52 * np.cos(angle), 1.0 + 0.52 * np.sin(angle)]
-    c, grad, near = surface.field(x)
-    rows, a = surface.rate(x, near)
+    c, grad = surface.field(x)
+    rows, a = surface.rate(x)
     V = np.random.default_rng(0).normal(size=(step.active.size, 2))
     predicted = np.einsum("pkj,pkj->p", a, np.where(rows[:, :, None] >= 0, V[rows], 0.0))
     eps = 1e-6
@@ -59,12 +59,36 @@ def test_surface_rate_is_the_time_derivative_of_the_smoothed_field(shape_functio
     div = np.einsum("pkj,pkj->p", step.dN, V[step.active_row[step.nodes]])
     step.pts.x[:] += eps * v_points
     step.pts.vol[:] *= 1.0 + eps * div
-    moved, _, _ = surfaces.KernelSurface(step).field(x)
+    moved, _ = surfaces.KernelSurface(step).field(x)
     difference = (moved - c) / eps
     assert np.max(np.abs(predicted - difference)) < 1e-4 * np.max(np.abs(difference))
     u = np.array([0.3, -0.7])
     rigid = np.einsum("pkj,pk->pj", a, (rows >= 0).astype(float)) @ u
     assert np.max(np.abs(rigid + grad @ u)) < 1e-12 * np.max(np.abs(grad @ u))
+
+
+def test_field_sums_the_kernel_over_every_point_within_its_radius():
+    """c(x) = Σ_q V_q W(‖x − x_q‖) and ∇c over the cell list (no neighbour lists written)
+    equal the sums over every body point within the kernel radius, at points inside, across
+    and outside the disk's surface, and where no point is within reach (c = 0)."""
+    step = _body_step("bspline2", DISK)
+    surface = surfaces.KernelSurface(step)
+    rng = np.random.default_rng(3)
+    x = np.r_[rng.uniform(0.3, 1.7, (200, 2)), [[1.9, 1.9]]]
+    c, grad = surface.field(x)
+    xq, vol, R = step.pts.x, step.pts.vol, surface.radius
+    for p in range(len(x)):
+        offset = x[p] - xq
+        r = np.linalg.norm(offset, axis=1)
+        inside = r <= R
+        w = np.array([surfaces._wendland(ri, R, 2) for ri in r[inside]])
+        expected_c = np.sum(vol[inside] * w[:, 0]) if inside.any() else 0.0
+        expected_grad = (np.sum((vol[inside] * w[:, 1])[:, None] * offset[inside], axis=0)
+                         if inside.any() else np.zeros(2))
+        assert c[p] == pytest.approx(expected_c, rel=1e-12, abs=1e-15)
+        np.testing.assert_allclose(grad[p], expected_grad, rtol=1e-12, atol=1e-12)
+    assert c[-1] == 0.0 and np.all(grad[-1] == 0.0)
+    assert np.count_nonzero(c > 0.0) > 100
 
 
 def test_calibrated_distance_across_a_flat_boundary():
@@ -78,7 +102,7 @@ def test_calibrated_distance_across_a_flat_boundary():
     offset = np.linspace(-0.5, 0.5, 9) * H
     for x0 in (1.0, 1.013):
         x = np.c_[np.full(offset.size, x0), 1.0 + offset]
-        c, grad, _ = surface.field(x)
+        c, grad = surface.field(x)
         distance, lam = surfaces.calibrated_distance(c, grad, surface.radius)
         error = np.abs(distance - offset) / H
         assert error[offset.size // 2] < 0.005

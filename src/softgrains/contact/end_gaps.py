@@ -99,7 +99,7 @@ def end_gaps(sc: SurfaceContacts, steps: dict, walls: dict, spacing: float,
             F[mine] = moved[o].F[sc.point[which[mine]]]
         if t in steps:  # T's kernel surface, from its moved points
             surface = KernelSurface(SimpleNamespace(pts=moved[t], stepper=steps[t].stepper))
-            c, grad, _ = surface.field(x)
+            c, grad = surface.field(x)
             distance, lam = calibrated_distance(c, grad, surface.radius)
             with np.errstate(divide="ignore", invalid="ignore"):
                 n_out = -grad / np.linalg.norm(grad, axis=1)[:, None]

@@ -109,19 +109,40 @@ def _kernel_between(x, p, xq, q, radius):
 
 
 @njit(cache=True)
-def _kernel_field(x, ptr, neighbours, xq, vol, radius, value, grad):
-    """c(x) = Σ_q V_q W(x − x_q) and ∇c at each query point (neighbours in CSR form)."""
+def _kernel_field_in_cells(x, xq, origin, side, dims, start, order, vol, radius, value, grad):
+    """c(x) = Σ_q V_q W(x − x_q) and ∇c at each query point, over the body points within
+    ``radius`` (‖x − x_q‖ ≤ radius) found in the 3^d cells about x of neighbours.PointCells'
+    cell list (cells of side ≥ radius), in the order of its neighbour lists, without writing
+    the lists (half the cost of summing over PointCells.ball's lists)."""
     m, d = x.shape
+    r2 = radius * radius
+    base = np.empty(d, np.int64)
     for p in range(m):
         value[p] = 0.0
         for j in range(d):
             grad[p, j] = 0.0
-        for e in range(ptr[p], ptr[p + 1]):
-            q = neighbours[e]
-            w, dw = _kernel_between(x, p, xq, q, radius)
-            value[p] += vol[q] * w
+            base[j] = int(np.floor((x[p, j] - origin[j]) / side))
+        for code in range(3**d):
+            rem, index, stride, inside = code, 0, 1, True
             for j in range(d):
-                grad[p, j] += vol[q] * dw * (x[p, j] - xq[q, j])
+                c = base[j] + rem % 3 - 1
+                rem //= 3
+                if c < 0 or c >= dims[j]:
+                    inside = False
+                index += c * stride
+                stride *= dims[j]
+            if not inside:
+                continue
+            for e in range(start[index], start[index + 1]):
+                q = order[e]
+                dist2 = 0.0
+                for j in range(d):
+                    dist2 += (x[p, j] - xq[q, j]) ** 2
+                if dist2 <= r2:
+                    w, dw = _kernel_between(x, p, xq, q, radius)
+                    value[p] += vol[q] * w
+                    for j in range(d):
+                        grad[p, j] += vol[q] * dw * (x[p, j] - xq[q, j])
 
 
 @njit(cache=True)
@@ -223,19 +244,24 @@ class KernelSurface:
         """The calibrated distance of each of the body's own points to its surface (< 0
         inside), computed once a step for all its passes."""
         if self._own_distance is None:
-            value, grad, _ = self.field(self.step.pts.x)
+            value, grad = self.field(self.step.pts.x)
             self._own_distance, _ = calibrated_distance(value, grad, self.radius)
         return self._own_distance
 
-    def field(self, x: np.ndarray):
-        """c and ∇c at x, and the neighbour lists (CSR) they were summed over."""
-        ptr, nb = self.cells.ball(x)
+    def field(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """c and ∇c at x."""
+        x = np.ascontiguousarray(x, float)
         value, grad = np.empty(len(x)), np.empty(x.shape)
-        _kernel_field(x, ptr, nb, self.step.pts.x, self.step.pts.vol, self.radius, value, grad)
-        return value, grad, (ptr, nb)
+        cells = self.cells
+        _kernel_field_in_cells(x, cells.points, cells.origin, cells.side, cells.dims,
+                               cells.start, cells.order, self.step.pts.vol, self.radius,
+                               value, grad)
+        return value, grad
 
-    def rate(self, x: np.ndarray, near) -> tuple[np.ndarray, np.ndarray]:
+    def rate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(rows, a): ∂c/∂t(x) = Σ_k a_k·v_{rows_k} (rows −1: unused)."""
+        x = np.ascontiguousarray(x, float)
+        near = self.cells.ball(x)
         step = self.step
         d = x.shape[1]
         s = int(round(step.N.shape[1] ** (1.0 / d)))
@@ -400,7 +426,7 @@ def _passes_against(other: int, owners: list[int], surfaces: dict, spacing: floa
                                                                      strict=True)])
     Fc = np.concatenate([surfaces[own].step.pts.F[c] for own, c in zip(owners, candidates,
                                                                      strict=True)])
-    c, grad, near = T.field(xc)
+    c, grad = T.field(xc)
     length = np.linalg.norm(grad, axis=1)
     distance, lam = calibrated_distance(c, grad, T.radius)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -412,11 +438,7 @@ def _passes_against(other: int, owners: list[int], surfaces: dict, spacing: floa
     rows, weights = T.velocity_stencil(xc)
     reached = ((c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap) & (gap < reach)
                & (weights.sum(axis=1) > 0.5))
-    which = np.flatnonzero(reached)
-    counts = np.diff(near[0])
-    sub_ptr = np.r_[0, np.cumsum(counts[which])].astype(np.int64)
-    sub_nb = near[1][np.repeat(reached, counts)]  # the neighbour lists of the kept points
-    rate_rows, rate_vec = T.rate(xc[reached], (sub_ptr, sub_nb))
+    rate_rows, rate_vec = T.rate(xc[reached])
     rate_vec /= length[reached][:, None, None]
     out, start, at = [], 0, 0
     for own, candidate, size in zip(owners, candidates, sizes, strict=True):
