@@ -25,16 +25,17 @@ PIXELS_PER_SPACING = 4  # raster pixel = δ/4 (δ: the median cell side)
 
 
 @njit(cache=True, inline="always")
-def _in_cell(a, b, shape):
+def _in_cell(a, b, shape, cos_alpha, sin_alpha):
     """Whether local coordinates (a, b) lie in a cell of ``shape``: the rectangle
     |a| ≤ s₀/2, |b| ≤ s₁/2 (s₂ = 0), or the ring sector of radius r ± ½Δr and half angle α
-    about the point at (r, 0) from the ring's centre (shape (r, Δr, α))."""
+    about the point at (r, 0) from the ring's centre (shape (r, Δr, α); cos α and sin α
+    given)."""
     if shape[2] == 0.0:
         return abs(a) <= 0.5 * shape[0] and abs(b) <= 0.5 * shape[1]
     X = shape[0] + a
     rho2 = X * X + b * b
     lo, hi = shape[0] - 0.5 * shape[1], shape[0] + 0.5 * shape[1]
-    return lo * lo <= rho2 <= hi * hi and abs(b) * np.cos(shape[2]) <= X * np.sin(shape[2])
+    return lo * lo <= rho2 <= hi * hi and abs(b) * cos_alpha <= X * sin_alpha
 
 
 @njit(cache=True, inline="always")
@@ -54,7 +55,9 @@ def _cell_reach(shape):
 def _raster(x, A, shape, grain, lower, px, py, nx, ny, covered, last):
     """Mark every pixel inside each point's cell (local coordinates A⁻¹(y − x), A = F E);
     ``covered`` counts distinct grains per pixel (points must come grouped by grain;
-    ``last`` holds the last grain that marked a pixel)."""
+    ``last`` holds the last grain that marked a pixel). Returns the number of pixels covered
+    and Σ_pixels max(0, covered − 1), counted as the marks are made."""
+    n_covered, n_overlap = 0, 0
     for p in range(x.shape[0]):
         a, b, c, d = A[p, 0, 0], A[p, 0, 1], A[p, 1, 0], A[p, 1, 1]
         det = a * d - b * c
@@ -69,17 +72,23 @@ def _raster(x, A, shape, grain, lower, px, py, nx, ny, covered, last):
         j0 = max(int(np.floor((x[p, 1] - ey - lower[1]) / py)), 0)
         j1 = min(int(np.floor((x[p, 1] + ey - lower[1]) / py)), ny - 1)
         g = grain[p]
+        cos_alpha, sin_alpha = np.cos(shape[p, 2]), np.sin(shape[p, 2])
         for i in range(i0, i1 + 1):
             rx = lower[0] + (i + 0.5) * px - x[p, 0]
             for j in range(j0, j1 + 1):
                 ry = lower[1] + (j + 0.5) * py - x[p, 1]
                 s = (d * rx - b * ry) / det
                 t = (-c * rx + a * ry) / det
-                if _in_cell(s, t, shape[p]):
+                if _in_cell(s, t, shape[p], cos_alpha, sin_alpha):
                     k = i * ny + j
                     if last[k] != g:
                         last[k] = g
+                        if covered[k] == 0:
+                            n_covered += 1
+                        else:
+                            n_overlap += 1
                         covered[k] += 1
+    return n_covered, n_overlap
 
 
 def coverage(x: np.ndarray, F: np.ndarray, cells: PointCells, grain: np.ndarray,
@@ -98,10 +107,9 @@ def coverage(x: np.ndarray, F: np.ndarray, cells: PointCells, grain: np.ndarray,
     # pixels that tile the box exactly (about δ/4 on each axis)
     nx, ny = (max(int(np.ceil(s / target)), 1) for s in size)
     covered = np.zeros(nx * ny, np.int32)
-    last = np.full(nx * ny, -1, np.int64)
+    last = np.full(nx * ny, -1, np.int32)
     deformed = np.einsum("pij,pjk->pik", np.asarray(F, float), cells.frame)
-    _raster(x, deformed, shape, grain, np.asarray(lower, float), size[0] / nx, size[1] / ny,
-            nx, ny, covered, last)
-    phi = float(np.count_nonzero(covered)) / covered.size
-    overlap = float(np.sum(np.maximum(covered - 1, 0))) / covered.size
-    return phi, overlap
+    n_covered, n_overlap = _raster(x, deformed, shape, grain.astype(np.int32),
+                                   np.asarray(lower, float), size[0] / nx, size[1] / ny, nx,
+                                   ny, covered, last)
+    return float(n_covered) / covered.size, float(n_overlap) / covered.size
