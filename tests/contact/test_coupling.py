@@ -243,6 +243,45 @@ def test_a_frictionless_contact_s_tangential_compliance_is_no_part_of_the_check(
     assert _impulse_basis(shared, 0, normals, np.array([0.5, 0.0, 0.5])) is None
 
 
+def test_the_mirrored_matrix_of_the_iterate_is_made_once(monkeypatch):
+    """BodyStep.mirror_negative_modes tests the Newton matrix for a negative mode with an
+    eigensolve; the next direction at the same iterate takes that A⁺ instead of making it
+    again (2–3 ms a body: 52 → 36 eigensolves in 8 dense compaction steps); after a step
+    of the iterate A⁺ is made anew. The direction is the same either way."""
+    import softgrains.integrator.implicit as implicit
+
+    def step_of_a_disk():
+        sim = Simulation(load_case({
+            "simulation": {"dt": 1e-3, "steps": 1},
+            "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
+            "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
+            "bodies": [{"name": "disk", "shape": "disk", "center": [1.0, 1.0],
+                        "radius": 0.5, "material": "gel", "velocity": [0.3, -0.2]}],
+            "output": {"progress": False},
+        }))
+        return implicit.BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
+                                 np.array([0.0, -10.0]), 1e-3, 0)
+
+    calls = []
+
+    def shifted(A, m):  # as if A had a negative mode: A + a multiple of M
+        calls.append(1)
+        return implicit.dense(A) + 1e-3 * np.diag(m)
+
+    monkeypatch.setattr(implicit, "mirrored_negative_modes", shifted)
+    step = step_of_a_disk()
+    assert step.mirror_negative_modes() and len(calls) == 1
+    du = step.newton_direction(direct=True)
+    assert len(calls) == 1  # A⁺ of this iterate reused
+    step.take_step(du)
+    step.newton_direction(direct=True)
+    assert len(calls) == 2  # a new iterate: a new A⁺
+    fresh = step_of_a_disk()
+    fresh._mirrored = True  # mirrored without the kept A⁺: made for the direction
+    np.testing.assert_array_equal(fresh.newton_direction(direct=True), du)
+    assert len(calls) == 3
+
+
 def test_the_compliance_at_sites_is_the_rows_compliance_mapped():
     """BodyStep.contact_response with a site map H (sites d × rows d): W_sites = H W_rows Hᵀ
     and X_sites = X_rows Hᵀ (the impulse response at the sites), to round-off, where the

@@ -297,6 +297,8 @@ class BodyStep:
         self.rnorm = self.r0 = float(np.linalg.norm(self.r))
         self.pi = self.potential(u, w_int)
         self._A = self._lu = self._v_affine = None  # Newton matrix, its LU, v(u) map
+        self._A_at = None  # the iterate u (the array) _A was built at
+        self._mirrored_at = None  # (u, A⁺) made by mirror_negative_modes at that u
         self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
 
     # -- the Newton matrix's tangent ---------------------------------------------------
@@ -332,20 +334,29 @@ class BodyStep:
         unknowns (no dense eigensolve), or A without a negative mode."""
         if not self.can_project() or self._mirrored or self.u.size > DENSE_LIMIT:
             return False
+        current = self._A is None or self._A_at is self.u
         A = self._A if self._A is not None else self.newton_matrix()
-        if mirrored_negative_modes(A, self.m.ravel()) is None:
+        mirrored = mirrored_negative_modes(A, self.m.ravel())
+        if mirrored is None:
             return False
         self._mirrored = True
         self._A = self._lu = None
+        # A⁺ of this iterate serves the next direction (the test of an earlier iterate's A
+        # does not)
+        self._mirrored_at = (self.u, mirrored) if current else None
         return True
 
     def _matrix(self):
         """The Newton matrix at the iterate: A (sparse), or A⁺ (dense) once mirrored."""
-        A = self.newton_matrix()
+        self._A_at = self.u
         if self._mirrored:
+            kept, self._mirrored_at = self._mirrored_at, None
+            if kept is not None and kept[0] is self.u:
+                return kept[1]
+            A = self.newton_matrix()
             mirrored = mirrored_negative_modes(A, self.m.ravel())
             return dense(A) if mirrored is None else mirrored
-        return A
+        return self.newton_matrix()
 
     # -- the step equations ------------------------------------------------------------
     def mass_times(self, u: np.ndarray) -> np.ndarray:
