@@ -5,6 +5,9 @@ Newton matrices were solved (newton_matrix.NewtonMatrix: factorizations against 
 updates of a kept factorization). Compare code versions by running it from each checkout
 on the same files, one after the other, 1 thread (issue 11, session 27).
 
+Problems saved with their warm start and solver options, every solve of a few steps of a
+run: benchmarks/contact_problems_from_run.py (issue 14, session 31).
+
 Run:  python benchmarks/contact_solve_replay.py FILE.npz ... [--tolerance 1e-6] [--repeat 3]
 """
 
@@ -12,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,15 +24,22 @@ from softgrains.contact.problem import ContactProblem
 from softgrains.contact.solvers import ContactSolverOptions, solve
 
 
-def replay(path: Path, tolerance: float, repeat: int) -> str:
-    """One table row: the best time of ``repeat`` solves from the saved warm start (or 0)."""
+def replay(path: Path, tolerance: float | None, repeat: int) -> str:
+    """One table row: the best time of ``repeat`` solves from the saved warm start (or 0),
+    with the saved solver options (benchmarks/contact_problems_from_run.py) or the
+    defaults; ``tolerance`` replaces the options' where given."""
     with np.load(path) as data:
         start = data["warm_start"] if "warm_start" in data else None
+        saved = {f.name: data[f"option_{f.name}"].item() for f in fields(ContactSolverOptions)
+                 if f"option_{f.name}" in data}
+    options = ContactSolverOptions(**saved)
+    if tolerance is not None:
+        options = replace(options, tolerance=tolerance)
     best = np.inf
     for _ in range(repeat):
         problem = ContactProblem.load(path)  # a fresh problem: nothing cached
         began = time.perf_counter()
-        result = solve(problem, start, ContactSolverOptions(tolerance=tolerance))
+        result = solve(problem, start, options)
         best = min(best, time.perf_counter() - began)
     matrices = [v for k, v in problem._cache.items() if isinstance(k, tuple)]
     factorizations = sum(getattr(m, "factorizations", 0) for m in matrices)
@@ -40,7 +51,8 @@ def replay(path: Path, tolerance: float, repeat: int) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("files", type=Path, nargs="+")
-    parser.add_argument("--tolerance", type=float, default=1e-6)
+    parser.add_argument("--tolerance", type=float, default=None,
+                        help="instead of the saved options' (default 1e-6 without them)")
     parser.add_argument("--repeat", type=int, default=3)
     args = parser.parse_args()
     print("| problem | contacts | s (best) | iterations | residual | factorizations | "

@@ -190,6 +190,24 @@ def test_a_problem_saved_to_a_file_replays_identically(tmp_path):
                                                              abs=0.0)
 
 
+def test_arrays_saved_beside_a_problem_leave_it_unchanged(tmp_path):
+    """ContactProblem.save(path, **extra): a warm start (and solver options) stored beside
+    the problem for the replay benchmark; load ignores them; a name of the problem's own
+    arrays is refused."""
+    p, _ = _ill_conditioned_problem(n=5, condition=1e3)
+    path = tmp_path / "with_start.npz"
+    start = np.full((p.n_contacts, p.dim), 0.25)
+    p.save(path, warm_start=start, option_tolerance=np.asarray(1e-7))
+    with np.load(path) as data:
+        np.testing.assert_array_equal(data["warm_start"], start)
+        assert data["option_tolerance"].item() == 1e-7
+    loaded = ContactProblem.load(path)
+    assert _solve(loaded, "newton").impulse == pytest.approx(_solve(p, "newton").impulse,
+                                                             abs=0.0)
+    with pytest.raises(ValueError, match="named like the problem"):
+        p.save(tmp_path / "clash.npz", W=np.zeros(3))
+
+
 DATA = Path(__file__).parent / "data"
 
 

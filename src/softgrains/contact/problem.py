@@ -159,9 +159,14 @@ class ContactProblem:
         return self._cached("frames", lambda: contact_frames(self.normal))
 
     # -- files ------------------------------------------------------------------------
-    def save(self, path: str | Path) -> None:
-        """Write the problem to an .npz file (replay it with :meth:`load`)."""
-        np.savez_compressed(path, format_version=FORMAT_VERSION,
+    def save(self, path: str | Path, **extra) -> None:
+        """Write the problem to an .npz file (replay it with :meth:`load`); ``extra``
+        arrays are stored beside it (e.g. a warm start, read by
+        benchmarks/contact_solve_replay.py; :meth:`load` ignores them)."""
+        names = {f.name for f in fields(self) if f.init} | {"format_version"}
+        if clash := names & set(extra):
+            raise ValueError(f"extra arrays may not be named like the problem's: {clash}")
+        np.savez_compressed(path, format_version=FORMAT_VERSION, **extra,
                             **{f.name: getattr(self, f.name) for f in fields(self) if f.init})
 
     @classmethod
