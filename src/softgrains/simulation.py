@@ -50,6 +50,10 @@ from softgrains.protocol import UniaxialCompaction
 from softgrains.solver import Solver, StepDiagnostics
 
 RETRYABLE = {"nan", "inverted", "newton", "contact", "motion"}  # a smaller Δt may cure
+# without a progress bar (not a terminal) run.log and the console get a progress line
+# every twentieth of the run's steps, and at least this often (seconds): a 1000-grain
+# compaction takes 10-20 s a step, so a twentieth of its 10 000 steps is hours
+PROGRESS_LOG_SECONDS = 60.0
 GROW_AFTER_STEPS = 5  # converged steps in a row before the controller doubles Δt again
 # contact.adaptive_reach (session 26): a step's point contacts are taken up to the gap
 # REACH_MARGIN × the relative motion its points are expected to make (at least REACH_FLOOR
@@ -513,6 +517,7 @@ class Simulation:
         self._first_step = self.state.step  # steps before run() (or the resumed ones) excluded
         status, message = "completed", ""
         log_every = max(1, self.n_steps // 20)
+        last_log = [0.0]  # wall time of the last progress line
         stop = StopRequest()
         try:
             if not resume:
@@ -544,7 +549,9 @@ class Simulation:
                     log.warning("%s", self.retry_events.pop(0))
                 if pvd is not None and (k % cfg.snapshot_interval == 0 or last or changed):
                     snapshot()
-                if log is not None and not progress.active and k % log_every == 0:
+                if log is not None and not progress.active and (
+                        k % log_every == 0 or wall - last_log[0] >= PROGRESS_LOG_SECONDS):
+                    last_log[0] = wall
                     log.info("step %d/%d  t = %.6g s  newton %d  contact %d  (%.1f s)%s", k,
                              self.n_steps, self.state.time, dg.newton_iterations,
                              dg.contact.iterations, wall, self._log_figures())

@@ -102,3 +102,29 @@ def test_progress_bar_on_terminal(monkeypatch: pytest.MonkeyPatch, capsys) -> No
     err = capsys.readouterr().err
     assert "5/10" in err and "t=0.25 s" in err and "phi=0.8123" in err and "loading" in err
     assert not progress.active
+
+
+def test_a_long_run_logs_its_progress_at_least_every_minute(tmp_path, monkeypatch) -> None:
+    """Without a terminal (no progress bar) run.log gets a progress line every twentieth of
+    the steps and at least every PROGRESS_LOG_SECONDS: a 1000-grain compaction takes
+    10–20 s a step, a twentieth of its steps hours. Here (40 steps, the interval made 0
+    s) every step has its line; with the interval of an hour, every second step (40/20)."""
+    import softgrains.simulation as simulation
+    from softgrains import Simulation, load_case
+
+    def logged_steps(seconds: float, out: Path) -> list[int]:
+        monkeypatch.setattr(simulation, "PROGRESS_LOG_SECONDS", seconds)
+        Simulation(load_case({
+            "simulation": {"dt": 1e-3, "steps": 40},
+            "grid": {"cell_size": 0.25, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
+            "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
+            "bodies": [{"name": "disk", "shape": "disk", "center": [1.0, 1.0],
+                        "radius": 0.5, "material": "gel"}],
+            "output": {"progress": False},
+        }), out=out).run()
+        lines = (out / "run.log").read_text().splitlines()
+        return [int(line.split("step ")[1].split("/")[0]) for line in lines
+                if " step " in line and "/40" in line]
+
+    assert logged_steps(0.0, tmp_path / "often") == list(range(1, 41))
+    assert logged_steps(3600.0, tmp_path / "hourly") == list(range(2, 41, 2))
