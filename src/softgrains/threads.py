@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Callable, Iterable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from typing import TypeVar
 
 import numba
@@ -65,17 +65,31 @@ class threads_for:  # noqa: N801 (used as a context manager, like a function)
 _pools: dict[int, ThreadPoolExecutor] = {}
 
 
+def concurrent_kernels() -> bool:
+    """Whether Numba's threading layer lets several Python threads run parallel kernels at
+    once: OpenMP and TBB do; the workqueue layer (chosen where neither is installed, e.g.
+    macOS without libomp) aborts the process ("Concurrent access has been detected").
+    False before the first parallel kernel has chosen the layer."""
+    try:
+        return numba.threading_layer() in ("omp", "tbb")
+    except ValueError:
+        return False
+
+
 def over_bodies(function: Callable[[T], R], items: Iterable[T]) -> list[R]:
     """``[function(x) for x in items]`` with the items shared among the run's Numba threads
     (``numba.get_num_threads()`` Python threads, each running its kernels on one thread):
     for per-body work that is independent between bodies and spends its time in calls that
     release the GIL. The results come in the items' order and are those of the serial loop;
-    the first exception in that order is raised (later items may have run)."""
+    every item is finished before the first exception in that order is raised. Serial where
+    the threading layer does not allow concurrent kernels (:func:`concurrent_kernels`)."""
     items = list(items)
     threads = numba.get_num_threads()
-    if threads < 2 or len(items) < 2:
+    if threads < 2 or len(items) < 2 or not concurrent_kernels():
         return [function(x) for x in items]
     if threads not in _pools:
         _pools[threads] = ThreadPoolExecutor(threads, thread_name_prefix="softgrains-body",
                                              initializer=numba.set_num_threads, initargs=(1,))
-    return list(_pools[threads].map(function, items))
+    futures = [_pools[threads].submit(function, x) for x in items]
+    wait(futures)
+    return [f.result() for f in futures]

@@ -90,3 +90,12 @@ def test_a_block_sparse_matrix_is_written_densely_as_scipy_does():
     blocks = rng.standard_normal((3, 2, 2))
     repeated = sp.bsr_matrix((blocks, np.array([0, 0, 1]), np.array([0, 2, 3])), shape=(4, 4))
     np.testing.assert_allclose(linear_solvers.dense(repeated), repeated.toarray(), rtol=1e-15)
+    rectangular = sp.bsr_matrix(sp.random(6, 9, density=0.5, random_state=7).toarray(),
+                                blocksize=(2, 3))
+    np.testing.assert_array_equal(linear_solvers.dense(rectangular), rectangular.toarray())
+
+
+def test_an_empty_system_factorizes_and_solves():
+    """A body with no unknown left (LAPACK refuses n = 0): an empty solution."""
+    lu = DenseLU(np.zeros((0, 0)))
+    assert lu.solve(np.zeros(0)).shape == (0,) and lu.solve(np.zeros((0, 3))).shape == (0, 3)

@@ -310,7 +310,7 @@ def block_scalar_matvec(indptr, indices, m_blocks, u, out):
             out[r, i] = acc
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def add_block_mass(data, m_blocks, c):
     """data[q] += c m_q I_d for every block q (the consistent mass term of the Newton matrix)."""
     d = data.shape[1]
@@ -319,7 +319,7 @@ def add_block_mass(data, m_blocks, c):
             data[q, i, i] += c * m_blocks[q]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def add_diagonal(data, diag_slot, diag):
     """data += diag on the block diagonals (the lumped mass term; diag per dof = row*d + i)."""
     d = data.shape[1]
@@ -329,7 +329,7 @@ def add_diagonal(data, diag_slot, diag):
             data[q, i, i] += diag[r * d + i]
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def constrain(data, indptr, indices, fixed):
     """Rows and columns of fixed dofs (per dof, row*d + i) become those of the identity."""
     n_rows = indptr.shape[0] - 1

@@ -44,8 +44,9 @@ def _bsr_to_dense(indptr, indices, data, out):
 
 
 def dense(A: sp.spmatrix | np.ndarray) -> np.ndarray:
-    """A as a dense array (a BSR matrix by a kernel that releases the GIL)."""
-    if isinstance(A, sp.bsr_matrix):
+    """A as a dense array (a BSR matrix of square blocks by a kernel that releases the
+    GIL)."""
+    if isinstance(A, sp.bsr_matrix) and A.blocksize[0] == A.blocksize[1]:
         out = np.empty(A.shape)
         _bsr_to_dense(A.indptr, A.indices, A.data, out)
         return out
@@ -58,12 +59,20 @@ class DenseLU:
     are factorised on several threads, threads.over_bodies)."""
 
     def __init__(self, A: sp.spmatrix | np.ndarray) -> None:
-        lu, self.pivots, info = _GETRF(np.array(dense(A), order="F"), overwrite_a=True)
+        matrix = np.array(dense(A), order="F")
+        if matrix.size == 0:  # (LAPACK refuses n = 0)
+            self.lu, self.pivots = matrix, np.zeros(0, np.int32)
+            return
+        lu, self.pivots, info = _GETRF(matrix, overwrite_a=True)
+        if info < 0:
+            raise ValueError(f"LAPACK getrf: argument {-info} is invalid")
         if info > 0 or not np.all(np.isfinite(lu)):
             raise RuntimeError("Factor is exactly singular")
         self.lu = lu
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        if self.lu.size == 0:
+            return np.array(b, float)
         x, info = _GETRS(self.lu, self.pivots, b)
         if info != 0:
             raise RuntimeError(f"LAPACK getrs failed (info {info})")

@@ -95,7 +95,7 @@ class _Pile:
     def place(self, center: np.ndarray, radius: float) -> None:
         """Add a disk (its column list and running top)."""
         i = self.size
-        column = min(int(center[0] / self.column_width), self.newest.size - 1)
+        column = min(max(int(center[0] / self.column_width), 0), self.newest.size - 1)
         below = self.newest[column]
         self.previous[i] = below
         top = center[1] + radius
@@ -116,7 +116,7 @@ def _drop_heights(x, r, clearance, centers, radii, newest, previous, top_below, 
     examined = 0
     for t in range(x.size):
         best = add
-        column = int(x[t] / column_width)
+        column = min(max(int(x[t] / column_width), 0), newest.size - 1)
         for k in range(max(column - 1, 0), min(column + 2, newest.size)):
             j = newest[k]
             while j >= 0 and top_below[j] + add + margin > best:
