@@ -50,6 +50,28 @@ SIDE_MARGIN = 1e-9  # the cells' side is at least (1 + this) × the radius
 CELLS_PER_POINT = 8  # ... and large enough for at most this many cells a point (and 64)
 
 
+@njit(cache=True, inline="always")
+def cell_base(x, i, origin, side, base):
+    """base = the (unclamped) cell coordinates of x[i] in cells of ``side`` from origin."""
+    for j in range(x.shape[1]):
+        base[j] = int(np.floor((x[i, j] - origin[j]) / side))
+
+
+@njit(cache=True, inline="always")
+def cell_around(base, code, dims):
+    """The flat index of the cell at offset ``code`` (0 … 3^d − 1, a base-3 digit per axis:
+    −1, 0, +1) from the cell ``base``; −1 where it lies outside the grid of ``dims``."""
+    rem, index, stride, inside = code, 0, 1, True
+    for j in range(base.size):
+        c = base[j] + rem % 3 - 1
+        rem //= 3
+        if c < 0 or c >= dims[j]:
+            inside = False
+        index += c * stride
+        stride *= dims[j]
+    return index if inside else -1
+
+
 @njit(cache=True)
 def _search(x, points, origin, side, dims, start, order, radius, ptr, out, count_only):
     """For each x[i]: the points within ``radius`` (‖x − x_q‖ ≤ radius). With
@@ -60,19 +82,11 @@ def _search(x, points, origin, side, dims, start, order, radius, ptr, out, count
     around = 3 ** d
     base = np.empty(d, np.int64)
     for i in range(x.shape[0]):
-        for j in range(d):
-            base[j] = int(np.floor((x[i, j] - origin[j]) / side))
+        cell_base(x, i, origin, side, base)
         found = 0
         for code in range(around):
-            rem, index, stride, inside = code, 0, 1, True
-            for j in range(d):
-                c = base[j] + rem % 3 - 1
-                rem //= 3
-                if c < 0 or c >= dims[j]:
-                    inside = False
-                index += c * stride
-                stride *= dims[j]
-            if not inside:
+            index = cell_around(base, code, dims)
+            if index < 0:
                 continue
             for e in range(start[index], start[index + 1]):
                 q = order[e]

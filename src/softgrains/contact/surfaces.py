@@ -47,7 +47,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numba import njit
 
-from softgrains.contact.neighbours import PointCells
+from softgrains.contact.neighbours import PointCells, cell_around, cell_base
 from softgrains.geometry import Disk, Rectangle
 from softgrains.grid.shape_functions import compute_stencils, stencil_width
 from softgrains.threads import threads_for
@@ -121,17 +121,10 @@ def _kernel_field_in_cells(x, xq, origin, side, dims, start, order, vol, radius,
         value[p] = 0.0
         for j in range(d):
             grad[p, j] = 0.0
-            base[j] = int(np.floor((x[p, j] - origin[j]) / side))
+        cell_base(x, p, origin, side, base)
         for code in range(3**d):
-            rem, index, stride, inside = code, 0, 1, True
-            for j in range(d):
-                c = base[j] + rem % 3 - 1
-                rem //= 3
-                if c < 0 or c >= dims[j]:
-                    inside = False
-                index += c * stride
-                stride *= dims[j]
-            if not inside:
+            index = cell_around(base, code, dims)
+            if index < 0:
                 continue
             for e in range(start[index], start[index + 1]):
                 q = order[e]
