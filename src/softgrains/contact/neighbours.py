@@ -51,6 +51,15 @@ CELLS_PER_POINT = 8  # ... and large enough for at most this many cells a point 
 
 
 @njit(cache=True, inline="always")
+def distance2(x, i, points, q):
+    """‖x[i] − points[q]‖² (summed over the axes in order)."""
+    total = 0.0
+    for j in range(x.shape[1]):
+        total += (x[i, j] - points[q, j]) ** 2
+    return total
+
+
+@njit(cache=True, inline="always")
 def cell_base(x, i, origin, side, base):
     """base = the (unclamped) cell coordinates of x[i] in cells of ``side`` from origin."""
     for j in range(x.shape[1]):
@@ -90,10 +99,7 @@ def _search(x, points, origin, side, dims, start, order, radius, ptr, out, count
                 continue
             for e in range(start[index], start[index + 1]):
                 q = order[e]
-                dist2 = 0.0
-                for j in range(d):
-                    dist2 += (x[i, j] - points[q, j]) ** 2
-                if dist2 <= r2:
+                if distance2(x, i, points, q) <= r2:
                     if not count_only:
                         out[ptr[i] + found] = q
                     found += 1

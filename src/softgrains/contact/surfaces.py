@@ -47,7 +47,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 from numba import njit
 
-from softgrains.contact.neighbours import PointCells, cell_around, cell_base
+from softgrains.contact.neighbours import PointCells, cell_around, cell_base, distance2
 from softgrains.geometry import Disk, Rectangle
 from softgrains.grid.shape_functions import compute_stencils, stencil_width
 from softgrains.threads import threads_for
@@ -102,10 +102,7 @@ def _wendland(r, radius, d):
 @njit(cache=True, inline="always")
 def _kernel_between(x, p, xq, q, radius):
     """W and W'(r)/r between query point x[p] and body point xq[q]."""
-    r2 = 0.0
-    for j in range(x.shape[1]):
-        r2 += (x[p, j] - xq[q, j]) ** 2
-    return _wendland(np.sqrt(r2), radius, x.shape[1])
+    return _wendland(np.sqrt(distance2(x, p, xq, q)), radius, x.shape[1])
 
 
 @njit(cache=True)
@@ -128,11 +125,9 @@ def _kernel_field_in_cells(x, xq, origin, side, dims, start, order, vol, radius,
                 continue
             for e in range(start[index], start[index + 1]):
                 q = order[e]
-                dist2 = 0.0
-                for j in range(d):
-                    dist2 += (x[p, j] - xq[q, j]) ** 2
-                if dist2 <= r2:
-                    w, dw = _kernel_between(x, p, xq, q, radius)
+                dist2 = distance2(x, p, xq, q)
+                if dist2 <= r2:  # (the kernel from the same distance, not recomputed)
+                    w, dw = _wendland(np.sqrt(dist2), radius, d)
                     value[p] += vol[q] * w
                     for j in range(d):
                         grad[p, j] += vol[q] * dw * (x[p, j] - xq[q, j])
