@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from softgrains.contact import solvers
+from softgrains.contact.delassus import product
 from softgrains.contact.local_law import OPEN, SLIP, STICK
 from softgrains.contact.problem import (
     ContactProblem,
@@ -604,3 +605,34 @@ def test_assembled_delassus_is_the_map_from_impulses_to_velocities(d):
         T[c * d:(c + 1) * d, c * d:(c + 1) * d] = R[c]
     np.testing.assert_allclose(problem.delassus(R).toarray(), T @ expected @ T.T,
                                atol=1e-12 * abs(expected).max())
+    # its product, with a shift on the diagonal (the proximal point's W + εI)
+    x = rng.normal(size=n * d)
+    np.testing.assert_allclose(product(problem.delassus(R), x, 0.3),
+                               (T @ expected @ T.T + 0.3 * np.eye(n * d)) @ x,
+                               atol=1e-12 * abs(expected).max() * abs(x).max())
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_the_delassus_product_reads_the_rows_of_the_nonzero_impulses(d):
+    """delassus.product of a symmetric block-sparse W (contacts sharing bodies) with
+    impulses that are zero at most contacts, as in a large problem, equals the dense
+    product, with and without a diagonal shift; a problem whose compliances are not
+    symmetric is refused by the Newton solver."""
+    from scipy import sparse
+
+    rng = np.random.default_rng(8)
+    n = 300
+    pattern = sparse.random(n, n, density=0.03, random_state=5)
+    pattern = ((pattern + pattern.T + sparse.identity(n)) != 0).toarray()
+    A = np.kron(pattern, np.ones((d, d))) * rng.normal(size=(n * d, n * d))
+    blocks = sparse.bsr_matrix(A + A.T, blocksize=(d, d))
+    x = rng.normal(size=(n, d))
+    x[rng.uniform(size=n) > 0.1] = 0.0  # one contact in ten carries an impulse
+    for shift in (0.0, 0.7):
+        expected = (blocks.toarray() + shift * np.eye(n * d)) @ x.ravel()
+        np.testing.assert_allclose(product(blocks, x.ravel(), shift), expected, rtol=1e-13,
+                                   atol=1e-13 * abs(expected).max())
+    problem = one_body_problem(np.triu(np.ones((2 * d, 2 * d))), np.zeros(2 * d),
+                               np.tile(np.eye(d)[0], (2, 1)))
+    with pytest.raises(ValueError, match="symmetric"):
+        solve(problem)

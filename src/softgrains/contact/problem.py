@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from softgrains.contact.delassus import assemble
 
@@ -89,11 +90,14 @@ class ContactProblem:
 
     def compliance_times(self, Q: np.ndarray) -> np.ndarray:
         """W_s Q_s for every body: the row velocity changes the row impulses Q give."""
-        out = np.empty_like(Q)
-        for s in range(self.k_size.size):
-            rows = slice(self.k_off[s], self.k_off[s] + self.k_size[s])
-            out[rows] = (self.block(s) @ Q[rows].ravel()).reshape(-1, self.dim)
-        return out
+        return _compliance_times(self.W, self.w_off, self.k_off, self.k_size,
+                                 np.ascontiguousarray(Q, float))
+
+    def asymmetry(self) -> float:
+        """max_s max |W_s − W_sᵀ| / max |W_s| over the bodies' compliances (which are
+        symmetric: the solvers' products read W by rows for its columns)."""
+        return self._cached("asymmetry", lambda: _asymmetry(self.W, self.w_off, self.k_size,
+                                                            self.dim))
 
     def row_velocities(self, P: np.ndarray) -> np.ndarray:
         """V(P) = V^free + W Q(P) at every body contact row."""
@@ -178,14 +182,55 @@ class ContactProblem:
             return cls(**{f.name: data[f.name] for f in fields(cls) if f.init})
 
 
+@njit(cache=True, nogil=True)
+def _compliance_times(W, w_off, k_off, k_size, Q):
+    """W_s Q_s for every body slot s (its block W_s, k d × k d row-major at w_off[s] in W;
+    its rows k_off[s] … + k_size[s] of Q (k_total, d)), one BLAS product per body."""
+    d = Q.shape[1]
+    out = np.empty_like(Q)
+    for s in range(k_size.size):
+        kd = k_size[s] * d
+        if kd == 0:
+            continue
+        block = W[w_off[s]:w_off[s] + kd * kd].reshape(kd, kd)
+        rows = Q[k_off[s]:k_off[s] + k_size[s]].reshape(kd)
+        out[k_off[s]:k_off[s] + k_size[s]] = np.dot(block, rows).reshape(k_size[s], d)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _asymmetry(W, w_off, k_size, d):
+    worst = 0.0
+    for s in range(k_size.size):
+        kd, at = k_size[s] * d, w_off[s]
+        largest = difference = 0.0
+        for i in range(kd):
+            for j in range(kd):
+                largest = max(largest, abs(W[at + i * kd + j]))
+                if j > i:
+                    difference = max(difference, abs(W[at + i * kd + j] - W[at + j * kd + i]))
+        if largest > 0.0:
+            worst = max(worst, difference / largest)
+    return worst
+
+
+@njit(cache=True, nogil=True)
+def _row_impulses(a_slot, a_col, b_slot, b_col, k_off, P, k_total):
+    Q = np.zeros((k_total, P.shape[1]))
+    for c in range(a_slot.size):  # (all α sides first, then all β: the summation order
+        if a_slot[c] >= 0:  # of the array version this replaced)
+            Q[k_off[a_slot[c]] + a_col[c]] += P[c]
+    for c in range(b_slot.size):
+        if b_slot[c] >= 0:
+            Q[k_off[b_slot[c]] + b_col[c]] += -P[c]
+    return Q
+
+
 def row_impulses(a_slot: np.ndarray, a_col: np.ndarray, b_slot: np.ndarray, b_col: np.ndarray,
                  k_off: np.ndarray, P: np.ndarray, k_total: int) -> np.ndarray:
     """Q (k_total, d): the impulses P summed per body contact row (+P on α, −P on β)."""
-    Q = np.zeros((k_total, P.shape[1]))
-    a, b = a_slot >= 0, b_slot >= 0
-    np.add.at(Q, k_off[a_slot[a]] + a_col[a], P[a])
-    np.add.at(Q, k_off[b_slot[b]] + b_col[b], -P[b])
-    return Q
+    return _row_impulses(a_slot, a_col, b_slot, b_col, k_off, np.ascontiguousarray(P, float),
+                         int(k_total))
 
 
 def relative_velocities(a_slot: np.ndarray, a_col: np.ndarray, b_slot: np.ndarray,

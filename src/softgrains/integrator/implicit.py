@@ -420,8 +420,8 @@ class BodyStep:
         point sites are fewer than the node rows their stencils reach: 166 against 222
         components in the dense compaction).
 
-        W is (k d × k d), rows and columns ordered (row, component); lumped: diag(1/m).
-        Fixed (Dirichlet) dofs take no impulse: their columns and rows are zero.
+        W is (k d × k d), symmetric, rows and columns ordered (row, component); lumped:
+        diag(1/m). Fixed (Dirichlet) dofs take no impulse: their columns and rows are zero.
         """
         d, k = self.d, rows.size
         kappa, _ = self.velocity_affine()
@@ -439,9 +439,11 @@ class BodyStep:
             E[dofs] = sites.T.toarray() * free[dofs, None]
         X = self.factorization().solve(E) * w
         X[~free] = 0.0
-        if sites is None:
-            return X, kappa * X[dofs]
-        return X, kappa * (sites @ X[dofs])
+        W = kappa * X[dofs] if sites is None else kappa * (sites @ X[dofs])
+        # A's free block is symmetric (the Hessian of the step's potential, its mirrored or
+        # projected forms too), so W is; made so exactly (the LU solves leave ~1e-12) for
+        # the contact solvers' products by block rows (delassus.product)
+        return X, 0.5 * (W + W.T)
 
     def factorization(self):
         """The LU of the current Newton matrix A (reused from a direct Newton solve)."""
