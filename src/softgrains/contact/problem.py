@@ -185,16 +185,21 @@ class ContactProblem:
 @njit(cache=True, nogil=True)
 def _compliance_times(W, w_off, k_off, k_size, Q):
     """W_s Q_s for every body slot s (its block W_s, k d × k d row-major at w_off[s] in W;
-    its rows k_off[s] … + k_size[s] of Q (k_total, d)), one BLAS product per body."""
+    its rows k_off[s] … + k_size[s] of Q (k_total, d)): W_s symmetric, Σ_i W_s[i, :] Q_i
+    over the nonzero Q_i alone (its contiguous rows; most rows of a large problem carry
+    no impulse)."""
     d = Q.shape[1]
-    out = np.empty_like(Q)
+    out = np.zeros_like(Q)
+    flat_q, flat_out = Q.reshape(Q.size), out.reshape(out.size)
     for s in range(k_size.size):
-        kd = k_size[s] * d
-        if kd == 0:
-            continue
-        block = W[w_off[s]:w_off[s] + kd * kd].reshape(kd, kd)
-        rows = Q[k_off[s]:k_off[s] + k_size[s]].reshape(kd)
-        out[k_off[s]:k_off[s] + k_size[s]] = np.dot(block, rows).reshape(k_size[s], d)
+        kd, base, first = k_size[s] * d, w_off[s], k_off[s] * d
+        for i in range(kd):
+            value = flat_q[first + i]
+            if value == 0.0:
+                continue
+            row = base + i * kd
+            for j in range(kd):
+                flat_out[first + j] += W[row + j] * value
     return out
 
 
