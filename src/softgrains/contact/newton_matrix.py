@@ -126,29 +126,30 @@ UPDATE_ROWS = 80
 # an updated solve is kept when its residual ‖J x − b‖ is within this fraction of ‖b‖,
 # else J is factorised anew (the capacitance matrix of nearly dependent rows)
 UPDATE_RESIDUAL = 1e-9
-# the kept solves J0⁻¹ e_r (N floats each) of one factorization: at most this many, then J
-# is factorised anew
+# the kept solves J0⁻¹ e_r (|E| floats each) of one factorization: at most this many, then
+# J is factorised anew
 KEPT_SOLVES = 4 * UPDATE_ROWS
 
 
 class _Factorization:
     """J0 = I − G0 + G0 ρ (W + shift I) factorised on its engaged rows E:
-    x_O = b_O, J_EE x_E = b_E − J_EO b_O; and its solves for unit vectors, kept."""
+    x_O = b_O, J_EE x_E = b_E − J_EO b_O; and its solves for unit vectors, kept on E alone
+    (Z = J0⁻¹ e_r is e_r on O: most rows of a large problem are open, and the kept
+    columns of all N rows cost a fifth of a 1000-grain step to gather)."""
 
     def __init__(self, W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float):
         self.G = G.copy()
         self.engaged = np.flatnonzero(_engaged(G))
-        self.outside, position = _positions(self.engaged, G.shape[0] * G.shape[1])
-        self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, position)
+        self.outside, self.position = _positions(self.engaged, G.shape[0] * G.shape[1])
+        self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, self.position)
         # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
         # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
         # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26). Raises
         # RuntimeError where J_EE is singular
         self.lu = spla.splu(self.J_ee.T) if self.engaged.size else None
-        # the kept solves J0⁻¹ e_r as the columns of one array (N, capacity) and each row
-        # r's column in it (gathering columns of one array instead of stacking kept vectors:
-        # the stacking was 5% of a 1000-grain step)
-        self.unit_solves = np.empty((G.shape[0] * G.shape[1], 0))
+        # the kept solves' rows E as the columns of one array (|E|, capacity), and each row
+        # r's column in it
+        self.unit_solves = np.empty((self.engaged.size, 0))
         self.unit_column: dict[int, int] = {}
 
     def solve(self, b: np.ndarray) -> np.ndarray:
@@ -167,13 +168,18 @@ class _Factorization:
         return y
 
     def columns(self, rows: np.ndarray) -> np.ndarray:
-        """Z = J0⁻¹ U, U the unit vectors of ``rows`` (N, m), from the kept solves."""
+        """Z_E, the rows E of Z = J0⁻¹ U (U the unit vectors of ``rows``; Z_O = U_O), as
+        (|E|, m), from the kept solves: Z_E = J_EE⁻¹ (U_E − J_EO U_O)."""
         missing = [int(r) for r in rows if int(r) not in self.unit_column]
         if missing:
-            size, kept = self.unit_solves.shape[0], len(self.unit_column)
-            U = np.zeros((size, len(missing)))
-            U[missing, np.arange(len(missing))] = 1.0
-            Z = self.solve(U)
+            kept, size = len(self.unit_column), self.engaged.size
+            right = np.zeros((size, len(missing)))
+            position = self.position[missing]
+            inside = position >= 0
+            right[position[inside], np.flatnonzero(inside)] = 1.0
+            if not inside.all():
+                right[:, ~inside] = -self.J_eo[:, -position[~inside] - 1].toarray()
+            Z = self.lu.solve(right, trans="T") if self.lu is not None else right
             if kept + len(missing) > self.unit_solves.shape[1]:  # room for twice as many
                 grown = np.empty((size, 2 * (kept + len(missing))))
                 grown[:, :kept] = self.unit_solves[:, :kept]
@@ -228,18 +234,28 @@ class NewtonMatrix:
             return dr if np.all(np.isfinite(dr)) else None
         if changed.size > UPDATE_ROWS or len(base.unit_column) + changed.size > KEPT_SOLVES:
             return None
-        # J is affine in G: the changed rows' differences are those of −ΔG + ρ ΔG (W + shift I)
-        D, _ = _rows(self.W, G - base.G, self.rho, self.shift, 0.0, changed,
-                     np.arange(n * d, dtype=np.int64))
-        Z = base.columns(changed)
+        # J is affine in G: the changed rows' differences are those of −ΔG + ρ ΔG (W + shift I),
+        # split by their columns in E and O (D = [D_E D_O])
+        D_e, D_o = _rows(self.W, G - base.G, self.rho, self.shift, 0.0, changed,
+                         base.position)
+        Z_e = base.columns(changed)  # Z = [Z_E; U_O]: Z_O has a 1 at (r_j, j) for r_j in O
+        at = base.position[changed]
+        open_rows = np.flatnonzero(at < 0)
+        DZ = D_e @ Z_e
+        if open_rows.size:
+            DZ[:, open_rows] += D_o[:, -at[open_rows] - 1].toarray()
         y = base.solve(b)
         with np.errstate(over="ignore", invalid="ignore"):
             try:
-                dr = y - Z @ np.linalg.solve(np.eye(changed.size) + D @ Z, D @ y)
+                c = np.linalg.solve(np.eye(changed.size) + DZ,
+                                    D_e @ y[base.engaged] + D_o @ y[base.outside])
             except np.linalg.LinAlgError:
                 return None
+            dr = y.copy()
+            dr[base.engaged] -= Z_e @ c
+            dr[changed[open_rows]] -= c[open_rows]
             residual = base.times(dr) - b
-            residual[changed] += D @ dr
+            residual[changed] += D_e @ dr[base.engaged] + D_o @ dr[base.outside]
             if not np.linalg.norm(residual) <= UPDATE_RESIDUAL * np.linalg.norm(b):
                 return None  # (also where not finite)
         # a row of the identity (G_i = 0: an open contact's component) exactly, as a
