@@ -610,6 +610,23 @@ def test_assembled_delassus_is_the_map_from_impulses_to_velocities(d):
     np.testing.assert_allclose(product(problem.delassus(R), x, 0.3),
                                (T @ expected @ T.T + 0.3 * np.eye(n * d)) @ x,
                                atol=1e-12 * abs(expected).max() * abs(x).max())
+    # by block rows built when asked for, in any order: the same rows, only those
+    lazy = problem.block_rows(R)
+    assembled = problem.delassus(R)
+    lazy.ensure(np.array([3, 1, 3]))
+    assert lazy.built.tolist() == [False, True, False, True]
+    lazy.ensure(np.array([0, 2]))
+    for c in range(n):
+        row = slice(assembled.indptr[c], assembled.indptr[c + 1])
+        np.testing.assert_array_equal(lazy.indices[lazy.start[c]:lazy.end[c]],
+                                      assembled.indices[row])
+        np.testing.assert_array_equal(lazy.data[lazy.start[c]:lazy.end[c]],
+                                      assembled.data[row])
+    x[2 * d:3 * d] = 0.0  # a contact without impulse: its row is not read
+    fresh = problem.block_rows(R)
+    np.testing.assert_allclose(product(fresh, x), T @ expected @ T.T @ x,
+                               atol=1e-12 * abs(expected).max() * abs(x).max())
+    assert not fresh.built[2] and fresh.built[[0, 1, 3]].all()
 
 
 @pytest.mark.parametrize("d", [2, 3])

@@ -18,9 +18,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from softgrains.contact.delassus import BlockRows, as_block_rows
+
 
 @njit(cache=True)
-def _split_rows(indptr, indices, blocks, G, rho, shift, identity, rows, position):
+def _split_rows(start, end, indices, blocks, G, rho, shift, identity, rows, position):
     """Rows ``rows`` of identity · I − G + ρ G (W + shift I), as two CSR matrices by their
     columns j: position[j] ≥ 0 → column position[j] of the first, else column
     −position[j] − 1 of the second; row i = c d + a is
@@ -33,7 +35,7 @@ def _split_rows(indptr, indices, blocks, G, rho, shift, identity, rows, position
         c = rows[e] // d
         inside = 0
         total = 0
-        for k in range(indptr[c], indptr[c + 1]):
+        for k in range(start[c], end[c]):
             for q in range(d):
                 total += 1
                 if position[indices[k] * d + q] >= 0:
@@ -51,7 +53,7 @@ def _split_rows(indptr, indices, blocks, G, rho, shift, identity, rows, position
         for b in range(d):
             g[b] = rho[c] * G[c, a, b]
         at_in, at_out = ptr_in[e], ptr_out[e]
-        for k in range(indptr[c], indptr[c + 1]):
+        for k in range(start[c], end[c]):
             c2 = indices[k]
             for q in range(d):
                 value = 0.0
@@ -71,12 +73,14 @@ def _split_rows(indptr, indices, blocks, G, rho, shift, identity, rows, position
     return ptr_in, cols_in, data_in, ptr_out, cols_out, data_out
 
 
-def _rows(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float, identity: float,
+def _rows(W: BlockRows, G: np.ndarray, rho: np.ndarray, shift: float, identity: float,
           rows: np.ndarray, position: np.ndarray) -> tuple[sp.csr_matrix, sp.csr_matrix]:
     """Rows ``rows`` of identity · I − G + G ρ (W + shift I) split by ``position`` into
-    two CSR matrices (:func:`_split_rows`)."""
+    two CSR matrices (:func:`_split_rows`; W's block rows of those contacts built)."""
+    W.ensure(rows // G.shape[1])
     ptr_in, cols_in, data_in, ptr_out, cols_out, data_out = _split_rows(
-        W.indptr, W.indices, W.data, G, rho, float(shift), float(identity), rows, position)
+        W.start, W.end, W.indices, W.data, G, rho, float(shift), float(identity), rows,
+        position)
     inside = int(np.count_nonzero(position >= 0))
     return (sp.csr_matrix((data_in, cols_in, ptr_in), shape=(rows.size, inside)),
             sp.csr_matrix((data_out, cols_out, ptr_out),
@@ -102,15 +106,16 @@ def _positions(engaged: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
     return outside, position
 
 
-def engaged_jacobian(W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, engaged: np.ndarray,
-                     dr: np.ndarray, shift: float = 0.0) -> tuple[sp.csr_matrix, np.ndarray]:
+def engaged_jacobian(W: sp.bsr_matrix | BlockRows, G: np.ndarray, rho: np.ndarray,
+                     engaged: np.ndarray, dr: np.ndarray,
+                     shift: float = 0.0) -> tuple[sp.csr_matrix, np.ndarray]:
     """(J_EE, J_EO dr_O) of J = I − G + G ρ (W + shift I): W as d × d block rows (BSR),
     G (n, d, d), ρ (n,), the engaged rows E (sorted), dr the step's values on the other
     rows (only dr_O is read). An engaged contact's block row must hold its diagonal block
     (the I − G terms are added there): engaged rows are movable (G vanishes where
     W_cc,nn = 0), and a contact touching a body is in its own block row (delassus.py)."""
     outside, position = _positions(engaged, dr.size)
-    J_ee, J_eo = _rows(W, G, rho, shift, 1.0, engaged, position)
+    J_ee, J_eo = _rows(as_block_rows(W), G, rho, shift, 1.0, engaged, position)
     return J_ee, J_eo @ dr[outside]
 
 
@@ -137,7 +142,7 @@ class _Factorization:
     (Z = J0⁻¹ e_r is e_r on O: most rows of a large problem are open, and the kept
     columns of all N rows cost a fifth of a 1000-grain step to gather)."""
 
-    def __init__(self, W: sp.bsr_matrix, G: np.ndarray, rho: np.ndarray, shift: float):
+    def __init__(self, W: BlockRows, G: np.ndarray, rho: np.ndarray, shift: float):
         self.G = G.copy()
         self.engaged = np.flatnonzero(_engaged(G))
         self.outside, self.position = _positions(self.engaged, G.shape[0] * G.shape[1])
@@ -201,8 +206,8 @@ class NewtonMatrix:
     (Z's columns kept too). Where J_EE is singular (the LU fails or overflows) a damped
     least-squares step on the engaged rows."""
 
-    def __init__(self, W: sp.bsr_matrix, rho: np.ndarray, shift: float = 0.0):
-        self.W, self.rho, self.shift = W, rho, float(shift)
+    def __init__(self, W: sp.bsr_matrix | BlockRows, rho: np.ndarray, shift: float = 0.0):
+        self.W, self.rho, self.shift = as_block_rows(W), rho, float(shift)
         self.base: _Factorization | None = None
         self.factorizations = 0  # for the diagnostics and tests
         self.updates = 0

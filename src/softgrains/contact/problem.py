@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
-from softgrains.contact.delassus import assemble
+from softgrains.contact.delassus import BlockRows, assemble, block_rows
 
 FORMAT_VERSION = 1
 VELOCITY_RESOLUTION = 1e-10  # relative: velocity differences below it are round-off
@@ -138,6 +138,12 @@ class ContactProblem:
             frames = np.broadcast_to(np.eye(self.dim), (self.n_contacts, self.dim, self.dim))
         contact, slot, col, sign = self.touches()
         return assemble(contact, slot, col, sign, self.W, self.w_off, self.k_size, frames)
+
+    def block_rows(self, frames: np.ndarray) -> BlockRows:
+        """W in the contact ``frames`` by block rows assembled when first asked for
+        (delassus.BlockRows: the solvers read only the rows of loaded contacts)."""
+        contact, slot, col, sign = self.touches()
+        return block_rows(contact, slot, col, sign, self.W, self.w_off, self.k_size, frames)
 
     def diagonal_blocks(self) -> np.ndarray:
         """W_cc (n, d, d): each contact's own compliance, Σ of its bodies' diagonal blocks."""

@@ -38,10 +38,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-import scipy.sparse as sp
 
 from softgrains.contact.alart_curnier import linearise
-from softgrains.contact.delassus import product
+from softgrains.contact.delassus import BlockRows, product
 from softgrains.contact.gauss_seidel import gauss_seidel
 from softgrains.contact.local_law import OPEN, SLIP, STICK
 from softgrains.contact.newton_matrix import NewtonMatrix
@@ -313,7 +312,7 @@ class _LocalOperator:
     """The problem in its contacts' frames: w = q + W r (flat, (contact, component))."""
 
     frames: np.ndarray
-    blocks: sp.bsr_matrix  # W by d × d blocks (products: delassus.product)
+    blocks: BlockRows  # W by d × d block rows, built when asked for (delassus.py)
     q: np.ndarray
     rho: np.ndarray
     movable: np.ndarray  # contacts some body can move at (W_cc,nn > 0)
@@ -329,7 +328,7 @@ def _local_operator(problem: ContactProblem) -> _LocalOperator:
         frames = problem.frames()
         Wcc_nn = np.einsum("ci,cij,cj->c", problem.normal, problem.diagonal_blocks(),
                            problem.normal)
-        blocks = problem.delassus(frames)
+        blocks = problem.block_rows(frames)
         return _LocalOperator(frames, blocks, to_local(frames, problem.free_velocity()).ravel(),
                               normal_masses(problem), Wcc_nn > 0.0)
     return problem._cached("local_operator", compute)
@@ -494,7 +493,8 @@ def _proximal_point(problem: ContactProblem, P: np.ndarray,
     ones), where the Newton and 500 Gauss–Seidel sweeps stopped at 1e-4. Starts from P;
     stops after ``budget`` Newton iterations; returns its best iterate."""
     op = _local_operator(problem)
-    epsilon = PROXIMAL_WEIGHT * float(op.blocks.diagonal().mean())
+    epsilon = PROXIMAL_WEIGHT * float(np.einsum("cii->", problem.diagonal_blocks())
+                                      ) / (problem.n_contacts * problem.dim)
     best = ContactResult(P, contact_status(problem, P), 0,
                          residual_norm(problem, P, floor=options.floor), False)
     if not epsilon > 0.0:
