@@ -109,11 +109,12 @@ def _positions(engaged: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
 def engaged_jacobian(W: sp.bsr_matrix | BlockRows, G: np.ndarray, rho: np.ndarray,
                      engaged: np.ndarray, dr: np.ndarray,
                      shift: float = 0.0) -> tuple[sp.csr_matrix, np.ndarray]:
-    """(J_EE, J_EO dr_O) of J = I − G + G ρ (W + shift I): W as d × d block rows (BSR),
-    G (n, d, d), ρ (n,), the engaged rows E (sorted), dr the step's values on the other
-    rows (only dr_O is read). An engaged contact's block row must hold its diagonal block
-    (the I − G terms are added there): engaged rows are movable (G vanishes where
-    W_cc,nn = 0), and a contact touching a body is in its own block row (delassus.py)."""
+    """(J_EE, J_EO dr_O) of J = I − G + G ρ (W + shift I): W as d × d block rows (a BSR
+    matrix or delassus.BlockRows), G (n, d, d), ρ (n,), the engaged rows E (sorted), dr
+    the step's values on the other rows (only dr_O is read). An engaged contact's block
+    row must hold its diagonal block (the I − G terms are added there): engaged rows are
+    movable (G vanishes where W_cc,nn = 0), and a contact touching a body is in its own
+    block row (delassus.py)."""
     outside, position = _positions(engaged, dr.size)
     J_ee, J_eo = _rows(as_block_rows(W), G, rho, shift, 1.0, engaged, position)
     return J_ee, J_eo @ dr[outside]
