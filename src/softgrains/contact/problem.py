@@ -34,6 +34,9 @@ from softgrains.contact.delassus import BlockRows, assemble, block_rows
 
 FORMAT_VERSION = 1
 VELOCITY_RESOLUTION = 1e-10  # relative: velocity differences below it are round-off
+# the largest relative asymmetry of a body's compliance a problem may have (W is symmetric,
+# BodyStep.contact_response; saved problems of sessions before 32 carry the LU's ~1e-10)
+SYMMETRY_TOLERANCE = 1e-8
 
 
 @dataclass
@@ -64,6 +67,16 @@ class ContactProblem:
     # quantities derived from the data above, computed once (treat a problem as immutable)
     _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
+    def __post_init__(self) -> None:
+        # every reader of W relies on its symmetry: the compliance products and the
+        # Gauss–Seidel spreads read rows for columns, the Delassus product the rows of the
+        # loaded contacts for their columns
+        if self.asymmetry() > SYMMETRY_TOLERANCE:
+            raise ValueError(f"the bodies' compliances W_s of a contact problem must be "
+                             f"symmetric (relative asymmetry {self.asymmetry():.1e} > "
+                             f"{SYMMETRY_TOLERANCE:.0e}): the solvers read W's columns as "
+                             f"its rows")
+
     def _cached(self, name: str, compute):
         if name not in self._cache:
             self._cache[name] = compute()
@@ -83,19 +96,13 @@ class ContactProblem:
         return row_impulses(self.a_slot, self.a_col, self.b_slot, self.b_col, self.k_off,
                             P, self.V_free.shape[0])
 
-    def block(self, slot: int) -> np.ndarray:
-        """Body ``slot``'s compliance W_s as a (k d × k d) matrix (a view)."""
-        kd = int(self.k_size[slot]) * self.dim
-        return self.W[self.w_off[slot]:self.w_off[slot] + kd * kd].reshape(kd, kd)
-
     def compliance_times(self, Q: np.ndarray) -> np.ndarray:
         """W_s Q_s for every body: the row velocity changes the row impulses Q give."""
         return _compliance_times(self.W, self.w_off, self.k_off, self.k_size,
                                  np.ascontiguousarray(Q, float))
 
     def asymmetry(self) -> float:
-        """max_s max |W_s − W_sᵀ| / max |W_s| over the bodies' compliances (which are
-        symmetric: the solvers' products read W by rows for its columns)."""
+        """max_s max |W_s − W_sᵀ| / max |W_s| over the bodies' compliances."""
         return self._cached("asymmetry", lambda: _asymmetry(self.W, self.w_off, self.k_size,
                                                             self.dim))
 

@@ -65,9 +65,6 @@ LINE_SEARCH_HALVINGS = 12
 # B7 incline test at μ 0.2, session 32) and every stage after it failed; stopped there,
 # the Tresca fixed point converges in 19 iterations
 MERIT_INCREASE_TAKEN = 1e4
-# the largest relative asymmetry of a body's compliance the Newton solver accepts (W is
-# symmetric; saved problems of sessions before 32 carry the LU solves' ~1e-10)
-SYMMETRY_TOLERANCE = 1e-8
 NSGS_FALLBACK_SWEEPS = 500  # Gauss–Seidel sweeps after a Newton solve that did not converge
 STAGNATION_ITERATIONS = 30  # Newton stops when its merit has not decreased in this many
 STAGNATION_DECREASE = 0.99  # ... iterations by at least this factor
@@ -320,11 +317,6 @@ class _LocalOperator:
 
 def _local_operator(problem: ContactProblem) -> _LocalOperator:
     def compute():
-        if problem.asymmetry() > SYMMETRY_TOLERANCE:
-            raise ValueError(f"the bodies' compliances W_s of a contact problem must be "
-                             f"symmetric (relative asymmetry {problem.asymmetry():.1e} > "
-                             f"{SYMMETRY_TOLERANCE:.0e}): the Newton solver's products "
-                             f"read W's columns as its rows")
         frames = problem.frames()
         Wcc_nn = np.einsum("ci,cij,cj->c", problem.normal, problem.diagonal_blocks(),
                            problem.normal)
