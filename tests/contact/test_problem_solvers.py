@@ -630,6 +630,26 @@ def test_assembled_delassus_is_the_map_from_impulses_to_velocities(d):
 
 
 @pytest.mark.parametrize("d", [2, 3])
+def test_rows_with_a_nonzero_or_changed_entry_are_found_as_numpy_finds_them(d):
+    """delassus.nonzero_rows / differing_rows (the impulses a product reads, a Newton
+    matrix's engaged and changed rows) against np.any over the short axis, NaN included."""
+    from softgrains.contact.delassus import differing_rows, nonzero_rows
+
+    rng = np.random.default_rng(3)
+    G = rng.normal(size=(500, d, d))
+    G[rng.uniform(size=500) < 0.6] = 0.0  # open contacts: zero blocks
+    G[7, 1, 0] = np.nan
+    H = G.copy()
+    H[::9, 0, d - 1] += 1.0
+    rows = G.reshape(-1, d)
+    np.testing.assert_array_equal(nonzero_rows(G, d), np.any(rows != 0.0, axis=1))
+    np.testing.assert_array_equal(differing_rows(G, H, d),
+                                  np.any(rows != H.reshape(-1, d), axis=1))
+    # an array against itself: only the row holding the NaN differs (NaN ≠ NaN)
+    assert np.flatnonzero(differing_rows(H, H, d)).tolist() == [7 * d + 1]
+
+
+@pytest.mark.parametrize("d", [2, 3])
 def test_the_delassus_product_reads_the_rows_of_the_nonzero_impulses(d):
     """delassus.product of a symmetric block-sparse W (contacts sharing bodies) with
     impulses that are zero at most contacts, as in a large problem, equals the dense

@@ -240,11 +240,38 @@ def product(W: sp.bsr_matrix | BlockRows, x: np.ndarray, shift: float = 0.0) -> 
     reading them cost a fifth of a step there; at every density this kernel is as fast as
     SciPy's CSR product."""
     rows = as_block_rows(W)
-    n, d = rows.n, rows.d
+    d = rows.d
     if d not in (2, 3):
         raise ValueError(f"the Delassus product is for 2D and 3D contacts, not {d}D")
     x = np.ascontiguousarray(x, float)
-    columns = np.flatnonzero(np.any(x.reshape(n, d) != 0.0, axis=1))
+    columns = np.flatnonzero(nonzero_rows(x, d))
     rows.ensure(columns)
     return _block_product_by_columns(rows.start, rows.end, rows.indices, rows.data,
                                      float(shift), x, columns)
+
+
+def nonzero_rows(x: np.ndarray, width: int) -> np.ndarray:
+    """Whether each row of x, read as rows of ``width`` entries, has an entry ≠ 0: the
+    same as np.any(x.reshape(-1, width) != 0, axis=1), whose reduction over a short axis
+    took ~1 ms on 43 000 contacts (this kernel 0.2 ms), several times a Newton iteration."""
+    return _rows_differ(np.ascontiguousarray(x, float).reshape(-1, width), None)
+
+
+def differing_rows(x: np.ndarray, y: np.ndarray, width: int) -> np.ndarray:
+    """Whether each row of x (rows of ``width`` entries) differs from y's in any entry."""
+    return _rows_differ(np.ascontiguousarray(x, float).reshape(-1, width),
+                        np.ascontiguousarray(y, float).reshape(-1, width))
+
+
+@njit(cache=True)
+def _rows_differ(a, b):
+    """Row i: a[i, j] ≠ b[i, j] for some j (b None: ≠ 0; NaN differs from everything)."""
+    m, k = a.shape
+    out = np.zeros(m, np.bool_)
+    for i in range(m):
+        for j in range(k):
+            other = 0.0 if b is None else b[i, j]
+            if a[i, j] != other:
+                out[i] = True
+                break
+    return out

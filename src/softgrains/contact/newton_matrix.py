@@ -18,7 +18,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
-from softgrains.contact.delassus import BlockRows, as_block_rows
+from softgrains.contact.delassus import BlockRows, as_block_rows, differing_rows, nonzero_rows
 
 
 @njit(cache=True)
@@ -90,8 +90,7 @@ def _rows(W: BlockRows, G: np.ndarray, rho: np.ndarray, shift: float, identity: 
 def _engaged(G: np.ndarray) -> np.ndarray:
     """Whether each row of J (contact, component) is engaged: G's row is not zero (else
     it is a row of the identity)."""
-    n, d = G.shape[0], G.shape[1]
-    return np.any(G.reshape(n * d, d) != 0.0, axis=1)
+    return nonzero_rows(G, G.shape[1])
 
 
 def _positions(engaged: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
@@ -233,8 +232,8 @@ class NewtonMatrix:
     def _updated(self, G: np.ndarray, b: np.ndarray) -> np.ndarray | None:
         """The Woodbury solve on the kept factorization, or None (too many rows changed,
         or its residual is not small)."""
-        base, (n, d) = self.base, G.shape[:2]
-        changed = np.flatnonzero(np.any((G != base.G).reshape(n * d, d), axis=1))
+        base = self.base
+        changed = np.flatnonzero(differing_rows(G, base.G, G.shape[1]))
         if changed.size == 0:
             dr = base.solve(b)
             return dr if np.all(np.isfinite(dr)) else None
