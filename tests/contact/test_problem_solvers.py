@@ -650,6 +650,17 @@ def test_rows_with_a_nonzero_or_changed_entry_are_found_as_numpy_finds_them(d):
 
 
 @pytest.mark.parametrize("d", [2, 3])
+def test_row_norms_equal_numpys_to_the_bit(d):
+    """problem.row_norms (the residual measures' per-contact norms) is
+    np.linalg.norm(x, axis=1) exactly, also on a strided view (the tangential components)."""
+    from softgrains.contact.problem import row_norms
+
+    x = np.random.default_rng(4).normal(size=(1000, d)) * np.logspace(-12, 12, 1000)[:, None]
+    for view in (x, x[:, 1:], x[::3]):
+        np.testing.assert_array_equal(row_norms(view), np.linalg.norm(view, axis=1))
+
+
+@pytest.mark.parametrize("d", [2, 3])
 def test_the_delassus_product_reads_the_rows_of_the_nonzero_impulses(d):
     """delassus.product of a symmetric block-sparse W (contacts sharing bodies) with
     impulses that are zero at most contacts, as in a large problem, equals the dense

@@ -49,6 +49,7 @@ from softgrains.contact.problem import (
     normal_masses,
     relative_error,
     residual_norm,
+    row_norms,
     to_global,
     to_local,
 )
@@ -253,7 +254,7 @@ def _better(first: ContactResult, second: ContactResult) -> ContactResult:
 def contact_status(problem: ContactProblem, P: np.ndarray) -> np.ndarray:
     """OPEN (no impulse), STICK (strictly inside the cone) or SLIP (on its boundary)."""
     r = to_local(problem.frames(), P)
-    norm_t = np.linalg.norm(r[:, 1:], axis=1)
+    norm_t = row_norms(r[:, 1:])
     scale = max(float(np.abs(r).max()), 1e-300)
     status = np.where(norm_t < problem.mu * r[:, 0] * (1.0 - 1e-9), STICK, SLIP)
     return np.where(r[:, 0] <= 1e-14 * scale, OPEN, status).astype(np.int64)
