@@ -650,6 +650,26 @@ def test_rows_with_a_nonzero_or_changed_entry_are_found_as_numpy_finds_them(d):
 
 
 @pytest.mark.parametrize("d", [2, 3])
+def test_contact_frames_rotate_to_local_components_and_back(d):
+    """problem.to_local / to_global: x_local = R_c x, x = R_cᵀ x_local with the contact
+    frames (rows n, t…; orthonormal): the normal component is n·x, the tangential ones
+    keep |x_t|, and the round trip returns x (to round-off)."""
+    from softgrains.contact.problem import to_global, to_local
+
+    rng = np.random.default_rng(6)
+    normal = rng.normal(size=(400, d))
+    normal /= np.linalg.norm(normal, axis=1)[:, None]
+    frames = contact_frames(normal)
+    x = rng.normal(size=(400, d))
+    local = to_local(frames, x)
+    np.testing.assert_allclose(local, np.einsum("cij,cj->ci", frames, x), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(local[:, 0], np.einsum("ci,ci->c", normal, x), atol=1e-15)
+    np.testing.assert_allclose(np.linalg.norm(local[:, 1:], axis=1), np.linalg.norm(
+        x - local[:, :1] * normal, axis=1), atol=1e-14)
+    np.testing.assert_allclose(to_global(frames, local), x, rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize("d", [2, 3])
 def test_row_norms_equal_numpys_to_the_bit(d):
     """problem.row_norms (the residual measures' per-contact norms) is
     np.linalg.norm(x, axis=1) exactly, also on a strided view (the tangential components)."""

@@ -281,12 +281,28 @@ def contact_frames(normal: np.ndarray) -> np.ndarray:
 
 
 def to_local(frames: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Components (n, d) of global vectors x in each contact's frame."""
-    return np.einsum("cij,cj->ci", frames, x)
+    """Components (n, d) of global vectors x in each contact's frame: R_c x_c."""
+    return _rotate(frames, np.asarray(x, float), False)
 
 
 def to_global(frames: np.ndarray, x: np.ndarray) -> np.ndarray:
-    return np.einsum("cji,cj->ci", frames, x)
+    """Global vectors (n, d) of components x in each contact's frame: R_cᵀ x_c."""
+    return _rotate(frames, np.asarray(x, float), True)
+
+
+@njit(cache=True)
+def _rotate(frames, x, transpose):
+    """y_c = R_c x_c (or R_cᵀ x_c) per contact (einsum's "cij,cj->ci" / "cji,cj->ci",
+    whose strided loop over 43 000 contacts took 1.7% of a 1000-grain front step)."""
+    n, d = x.shape
+    y = np.empty((n, d))
+    for c in range(n):
+        for i in range(d):
+            s = 0.0
+            for j in range(d):
+                s += (frames[c, j, i] if transpose else frames[c, i, j]) * x[c, j]
+            y[c, i] = s
+    return y
 
 
 def project_to_cone(r: np.ndarray, mu: np.ndarray) -> np.ndarray:
