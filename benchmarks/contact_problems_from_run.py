@@ -22,6 +22,18 @@ from softgrains.case import load_case
 from softgrains.simulation import Simulation
 
 
+def resumed_without_stop(run: Path) -> Simulation:
+    """The run folder's simulation resumed from its checkpoint, its protocol's stop
+    criteria lifted (so that the steps taken from there are not cut short)."""
+    case = load_case(run / "case.toml")
+    if case.protocol is not None:
+        case = case.model_copy(update={"protocol": case.protocol.model_copy(
+            update={"stop_stress_ratio": None, "stop_packing_fraction": None})})
+    sim = Simulation(case)
+    sim.resume(run / "checkpoint.h5")
+    return sim
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run", type=Path)
@@ -29,12 +41,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=3)
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    case = load_case(args.run / "case.toml")
-    if case.protocol is not None:  # no stop within the saved steps
-        case = case.model_copy(update={"protocol": case.protocol.model_copy(
-            update={"stop_stress_ratio": None, "stop_packing_fraction": None})})
-    sim = Simulation(case)
-    sim.resume(args.run / "checkpoint.h5")
+    sim = resumed_without_stop(args.run)
     solve, saved = coupling.solve, []
 
     def saving(problem, P0, options):

@@ -20,9 +20,9 @@ import argparse
 import time
 from pathlib import Path
 
+from contact_problems_from_run import resumed_without_stop
+
 import softgrains.contact.coupling as coupling
-from softgrains.case import load_case
-from softgrains.simulation import Simulation
 
 
 def main() -> None:
@@ -30,12 +30,7 @@ def main() -> None:
     parser.add_argument("run", type=Path, help="run folder with checkpoint.h5, case.toml")
     parser.add_argument("--steps", type=int, default=2)
     args = parser.parse_args()
-    case = load_case(args.run / "case.toml")
-    if case.protocol is not None:  # no stop within the traced steps
-        case = case.model_copy(update={"protocol": case.protocol.model_copy(
-            update={"stop_stress_ratio": None, "stop_packing_fraction": None})})
-    sim = Simulation(case)
-    sim.resume(args.run / "checkpoint.h5")
+    sim = resumed_without_stop(args.run)
     solve, stalled = coupling.solve, coupling.Progress.stalled
 
     def traced_solve(problem, P0, options):
