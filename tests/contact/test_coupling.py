@@ -303,11 +303,54 @@ def test_the_compliance_at_sites_is_the_rows_compliance_mapped():
     rng = np.random.default_rng(7)
     rows = np.sort(rng.choice(step.u.shape[0], 12, replace=False))
     H = sp.csr_matrix(rng.standard_normal((10, 24)) * (rng.random((10, 24)) < 0.3))
-    X_rows, W_rows = step.contact_response(rows, True)
-    X_sites, W_sites = step.contact_response(rows, True, H)
+    response_rows, W_rows = step.contact_response(rows, True)
+    response_sites, W_sites = step.contact_response(rows, True, H)
+    X_rows, X_sites = response_rows.matrix(), response_sites.matrix()
     scale = np.abs(W_rows).max()
     np.testing.assert_allclose(W_sites, H @ (H @ W_rows.T).T, atol=1e-12 * scale)
     np.testing.assert_allclose(X_sites, (H @ X_rows.T).T, atol=1e-12 * np.abs(X_rows).max())
+    q = rng.standard_normal(X_sites.shape[1])
+    np.testing.assert_allclose(response_sites.move(q), X_sites @ q,
+                               atol=1e-12 * np.abs(X_sites @ q).max())
+
+
+def test_the_compliance_by_cholesky_is_the_one_by_lu():
+    """Where the Newton matrix A is positive definite it is factorised by Cholesky and the
+    compliance formed as W = κ w (L⁻¹G)ᵀ(L⁻¹G), X applied by solves: the same W and X q as
+    the LU's W = κ w Gᵀ A⁻¹ G, X = w A⁻¹ G (to round-off), W symmetric to the bit and
+    positive semidefinite; fixed dofs take no impulse."""
+    import scipy.sparse as sp
+
+    from softgrains.integrator import linear_solvers
+    from softgrains.integrator.implicit import BodyStep
+
+    sim = Simulation(load_case({
+        "simulation": {"dt": 1e-3, "steps": 1},
+        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
+        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [{"name": "disk", "shape": "disk", "center": [1.0, 1.0], "radius": 0.5,
+                    "material": "gel"}],
+        "output": {"progress": False},
+    }))
+    step = BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
+                    np.zeros(2), 1e-3, 0)
+    step.fixed[3] = True  # a fixed (Dirichlet) row among the contact rows
+    rng = np.random.default_rng(11)
+    rows = np.sort(np.r_[3, rng.choice(np.arange(4, step.u.shape[0]), 11, replace=False)])
+    H = sp.csr_matrix(rng.standard_normal((10, 24)) * (rng.random((10, 24)) < 0.3))
+    cholesky, W = step.contact_response(rows, True, H)
+    assert cholesky.positive_definite and cholesky.formed is None
+    np.testing.assert_array_equal(W, W.T)
+    assert np.linalg.eigvalsh(W).min() >= -1e-12 * np.abs(W).max()
+    step._lu = linear_solvers.DenseLU(step._A)  # the same A by LU
+    lu, W_lu = step.contact_response(rows, True, H)
+    assert lu.formed is not None
+    np.testing.assert_allclose(W, W_lu, atol=1e-12 * np.abs(W_lu).max())
+    q = rng.standard_normal(W.shape[0])
+    np.testing.assert_allclose(cholesky.move(q), lu.move(q),
+                               atol=1e-12 * np.abs(lu.move(q)).max())
+    fixed_dofs = step.fixed.ravel()
+    assert fixed_dofs.any() and not cholesky.move(q)[fixed_dofs].any()
 
 
 def _thrown_disk(max_step_motion: float, speed: float = 15.0, gravity: float = 0.0,

@@ -1,5 +1,5 @@
-"""The bodies' Newton solves (integrator/linear_solvers.py): the dense LU used for small
-bodies gives what SuperLU gives, for one right-hand side and for many (the contact
+"""The bodies' Newton solves (integrator/linear_solvers.py): the dense Cholesky (positive
+definite) or LU used for small bodies gives what SuperLU gives, for one right-hand side and for many (the contact
 compliance [A⁻¹]_cc), and fails the way SuperLU does on a singular matrix; the Newton
 matrix with its negative modes mirrored."""
 
@@ -9,6 +9,7 @@ import scipy.sparse as sp
 
 from softgrains.integrator import linear_solvers
 from softgrains.integrator.linear_solvers import (
+    DenseCholesky,
     DenseLU,
     LinearSolver,
     factorize,
@@ -99,3 +100,29 @@ def test_an_empty_system_factorizes_and_solves():
     """A body with no unknown left (LAPACK refuses n = 0): an empty solution."""
     lu = DenseLU(np.zeros((0, 0)))
     assert lu.solve(np.zeros(0)).shape == (0,) and lu.solve(np.zeros((0, 3))).shape == (0, 3)
+
+
+def test_a_symmetric_positive_definite_matrix_is_factorised_by_cholesky():
+    """factorize: Cholesky (half the LU's work) for a symmetric positive definite A, the
+    LU for a symmetric indefinite or a nonsymmetric one; each solves A x = b, and the half
+    solve gives Bᵀ A⁻¹ B = (L⁻¹B)ᵀ(L⁻¹B)."""
+    rng = np.random.default_rng(9)
+    n = 30
+    Q, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    spd = (Q * rng.uniform(0.1, 10.0, n)) @ Q.T
+    spd = 0.5 * (spd + spd.T)
+    indefinite = (Q * np.r_[-1.0, rng.uniform(0.1, 10.0, n - 1)]) @ Q.T
+    indefinite = 0.5 * (indefinite + indefinite.T)
+    nonsymmetric = spd + 0.01 * np.triu(rng.standard_normal((n, n)), 1)
+    b, B = rng.standard_normal(n), rng.standard_normal((n, 4))
+    for A, kind in ((spd, DenseCholesky), (indefinite, DenseLU), (nonsymmetric, DenseLU),
+                    (sp.bsr_matrix(spd, blocksize=(2, 2)), DenseCholesky)):
+        f = factorize(A)
+        assert type(f) is kind
+        dense = A.toarray() if sp.issparse(A) else A
+        np.testing.assert_allclose(dense @ f.solve(b), b, atol=1e-10)
+        np.testing.assert_allclose(dense @ f.solve(B), B, atol=1e-10)
+    Y = factorize(spd).half_solve(B)
+    np.testing.assert_allclose(Y.T @ Y, B.T @ np.linalg.solve(spd, B), rtol=1e-10)
+    # a nonsymmetric matrix whose lower triangle is positive definite is not taken for one
+    assert type(factorize(np.tril(spd) + 5.0 * np.triu(np.ones((n, n)), 1))) is DenseLU

@@ -76,6 +76,7 @@ from softgrains.contact.solvers import ContactSolverOptions, solve
 from softgrains.contact.surfaces import select
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
+from softgrains.integrator.implicit import ImpulseResponse
 from softgrains.threads import over_bodies
 
 IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
@@ -643,13 +644,14 @@ def _working_slots(everywhere: Slots, normal: np.ndarray, member: np.ndarray,
 def _update_compliances(steps: dict, slots: Slots, fresh: set, delassus: bool) -> bool:
     """Each body's compliance W_s at its contact sites where it is not known yet or its
     Newton matrix changed (the bodies ``fresh``); whether every W_s is positive
-    semidefinite on the impulses its contacts can carry (``_impulse_basis``; a projected
-    tangent's is: A is SPD; an exact one's is checked)."""
-    def update(slot: int) -> tuple[np.ndarray | None, np.ndarray, bool]:
+    semidefinite on the impulses its contacts can carry (``_impulse_basis``; where A is
+    SPD it is: a projected tangent, or A factorised by Cholesky; otherwise checked)."""
+    def update(slot: int) -> tuple[ImpulseResponse | None, np.ndarray, bool]:
         body, H = slots.bodies[slot], slots.H[slot] if delassus else None
         response, W = steps[body].contact_response(slots.rows[slot], delassus, H)
         W = W if H is not None else slots.compliance(slot, W)
         return response, W, (not delassus or steps[body].projected
+                             or (response is not None and response.positive_definite)
                              or _semidefinite(W, slots.impulse_basis[slot]))
 
     stale = [slot for slot, body in enumerate(slots.bodies)

@@ -54,6 +54,7 @@ from softgrains.integrator.assembly import (
 )
 from softgrains.integrator.linear_solvers import (
     DENSE_LIMIT,
+    DenseCholesky,
     LinearSolver,
     dense,
     factorize,
@@ -123,6 +124,42 @@ class BodyStepResult:
     integrator_dissipation: float = 0.0
     transfer_dissipation: float = 0.0
     prescribed_work: float = 0.0  # work of the reactions at prescribed (Dirichlet) nodes
+
+
+@dataclass(frozen=True)
+class ImpulseResponse:
+    """A body's impulse-to-iterate map X = w A⁻¹ G (G: its contact sites' components on the
+    unknowns, zero at fixed dofs; w the impulse weight), applied as X q = w A⁻¹ (G q) with
+    the factorization of the A its compliance was formed from, or by X where the LU formed
+    it anyway (``formed``)."""
+
+    weight: float
+    factorization: object
+    sites: np.ndarray
+    free: np.ndarray
+    formed: np.ndarray | None = None
+
+    @property
+    def positive_definite(self) -> bool:
+        """Whether A is known to be positive definite (factorised by Cholesky; SuperLU's
+        factorization does not tell)."""
+        return isinstance(self.factorization, DenseCholesky)
+
+    def move(self, q: np.ndarray) -> np.ndarray:
+        """X q (q: one impulse per site component)."""
+        if self.formed is not None:
+            return self.formed @ q
+        x = self.weight * self.factorization.solve(self.sites @ q)
+        x[~self.free] = 0.0
+        return x
+
+    def matrix(self) -> np.ndarray:
+        """X itself."""
+        if self.formed is not None:
+            return self.formed
+        X = self.weight * self.factorization.solve(self.sites)
+        X[~self.free] = 0.0
+        return X
 
 
 def line_search(u, du, r, pi, internal_force, residual, potential):
@@ -412,13 +449,14 @@ class BodyStep:
 
     def contact_response(self, rows: np.ndarray, delassus: bool,
                          sites: sp.spmatrix | None = None
-                         ) -> tuple[np.ndarray | None, np.ndarray]:
+                         ) -> tuple[ImpulseResponse | None, np.ndarray]:
         """The impulse-to-iterate map X = w A⁻¹ E (or None for the lumped relation) and the
         local compliance W = κ w [A⁻¹]_cc (ALGORITHM.md §6) at the active ``rows``; with
         ``sites`` H (sites d × k d, Delassus), at the sites v_s = H v_rows instead:
         X = w A⁻¹ E Hᵀ and W = κ H X_rows, one column per site component (a grain's
         point sites are fewer than the node rows their stencils reach: 166 against 222
-        components in the dense compaction).
+        components in the dense compaction). With G = E Hᵀ and A = L Lᵀ (Cholesky, A
+        positive definite) W = κ w (L⁻¹G)ᵀ(L⁻¹G), and X is applied by solves, not formed.
 
         W is (k d × k d), symmetric, rows and columns ordered (row, component); lumped:
         diag(1/m). Fixed (Dirichlet) dofs take no impulse: their columns and rows are zero.
@@ -437,13 +475,18 @@ class BodyStep:
         else:
             E = np.zeros((self.u.size, sites.shape[0]))
             E[dofs] = sites.T.toarray() * free[dofs, None]
-        X = self.factorization().solve(E) * w
+        factorization = self.factorization()
+        if isinstance(factorization, DenseCholesky):
+            Y = factorization.half_solve(E)
+            W = (kappa * w) * (Y.T @ Y)
+            return ImpulseResponse(w, factorization, E, free), 0.5 * (W + W.T)
+        X = factorization.solve(E) * w
         X[~free] = 0.0
         W = kappa * X[dofs] if sites is None else kappa * (sites @ X[dofs])
         # A's free block is symmetric (the Hessian of the step's potential, its mirrored or
         # projected forms too), so W is; made so exactly (the LU solves leave ~1e-12) for
         # the contact solvers' products by block rows (delassus.product)
-        return X, 0.5 * (W + W.T)
+        return ImpulseResponse(w, factorization, E, free, X), 0.5 * (W + W.T)
 
     def factorization(self):
         """The LU of the current Newton matrix A (reused from a direct Newton solve)."""
@@ -594,12 +637,12 @@ class BodyStep:
         self.pi -= float(np.sum(w * Q * self.u[rows]))
 
     def impulse_move(self, rows: np.ndarray, Q: np.ndarray,
-                     response: np.ndarray | None) -> np.ndarray:
+                     response: ImpulseResponse | None) -> np.ndarray:
         """Δu caused by impulse changes Q at ``rows``: X Q with the response X = w A⁻¹ E of
         :meth:`contact_response` (Delassus; Q then at the sites where X is theirs), or
         w Q/(c_m m) at the rows alone (lumped)."""
         if response is not None:
-            return (response @ Q.ravel()).reshape(self.u.shape)
+            return response.move(Q.ravel()).reshape(self.u.shape)
         move = np.zeros_like(self.u)
         move[rows] = self.impulse_weight * Q / (self.c_m * self.m[rows])
         move[self.fixed] = 0.0
