@@ -1,7 +1,7 @@
 """The bodies' Newton solves (integrator/linear_solvers.py): the dense Cholesky (positive
-definite) or LU used for small bodies gives what SuperLU gives, for one right-hand side and for many (the contact
-compliance [A⁻¹]_cc), and fails the way SuperLU does on a singular matrix; the Newton
-matrix with its negative modes mirrored."""
+definite) or LU used for small bodies gives what SuperLU gives, for one right-hand side
+and for many (the contact compliance [A⁻¹]_cc), and fails the way SuperLU does on a
+singular matrix; the Newton matrix with its negative modes mirrored."""
 
 import numpy as np
 import pytest
