@@ -52,30 +52,30 @@ def _bsr_to_dense(indptr, indices, data, out):
                     out[i * d + a, j * d + b] += data[k, a, b]
 
 
-def dense(A: sp.spmatrix | np.ndarray) -> np.ndarray:
+def dense(A: sp.spmatrix | np.ndarray, order: str = "C") -> np.ndarray:
     """A as a dense array (a BSR matrix of square blocks by a kernel that releases the
-    GIL)."""
+    GIL; ``order`` that of a new array)."""
     if isinstance(A, sp.bsr_matrix) and A.blocksize[0] == A.blocksize[1]:
-        out = np.empty(A.shape)
+        out = np.empty(A.shape, order=order)
         _bsr_to_dense(A.indptr, A.indices, A.data, out)
         return out
-    return A.toarray() if sp.issparse(A) else A
+    return A.toarray(order=order) if sp.issparse(A) else A
 
 
 @njit(cache=True, nogil=True)
 def _symmetric(A, tolerance):
-    """Whether |A_ij − A_ji| ≤ tolerance × max |A_ij| for every i, j (A square)."""
-    n = A.shape[0]
-    scale = 0.0
-    for i in range(n):
-        for j in range(n):
-            scale = max(scale, abs(A[i, j]))
-    bound = tolerance * scale
-    for i in range(n):
-        for j in range(i):
-            if abs(A[i, j] - A[j, i]) > bound:
-                return False
-    return True
+    """Whether max |A_ij − A_ji| ≤ tolerance × max |A_ij| (A square; one pass over the
+    pairs i ≥ j, by tiles so that both A_ij and A_ji are read from cache)."""
+    n, tile = A.shape[0], 32
+    scale, asymmetry = 0.0, 0.0
+    for j0 in range(0, n, tile):
+        for i0 in range(j0, n, tile):
+            for j in range(j0, min(j0 + tile, n)):
+                for i in range(max(i0, j), min(i0 + tile, n)):
+                    lower, upper = A[i, j], A[j, i]
+                    scale = max(scale, abs(lower), abs(upper))
+                    asymmetry = max(asymmetry, abs(lower - upper))
+    return asymmetry <= tolerance * scale
 
 
 class DenseCholesky:
@@ -139,7 +139,8 @@ def factorize(A: sp.spmatrix | np.ndarray):
     the Cholesky factorization where A is symmetric positive definite, else the dense LU;
     above, SuperLU."""
     if A.shape[0] <= DENSE_LIMIT or not sp.issparse(A):
-        matrix = np.array(dense(A), order="F")
+        matrix = dense(A, order="F")
+        matrix = np.array(matrix, order="F", copy=matrix is A)  # (overwritten below)
         if matrix.size and _symmetric(matrix, SYMMETRY_TOLERANCE):
             cholesky = DenseCholesky.attempt(matrix)  # (overwrites it)
             if cholesky is not None:
