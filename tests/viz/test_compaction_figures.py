@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +20,7 @@ from softgrains.viz.compaction import (
     _load_run,
     _phi_sigma_figure,
     _side_by_side_figure,
+    _start_animations,
     _subsample,
     plot_compaction,
 )
@@ -162,6 +164,30 @@ def test_two_runs_write_every_figure(tmp_path: Path) -> None:
         assert gif.size == (400, 400)
     with Image.open(out / "animation_stiff.gif") as gif:
         assert gif.n_frames == 5
+
+
+def test_animations_drawn_in_worker_processes_are_those_drawn_here(tmp_path: Path,
+                                                                    monkeypatch) -> None:
+    """Several runs' animations are drawn in parallel processes (one core: here, one after
+    the other): the same files byte for byte, in the same format (GIF here: the format is
+    decided in this process, where the fixture has hidden ffmpeg)."""
+    soft = _make_run(tmp_path / "soft", "Soft μ=0.3", stiffness=1e4)
+    stiff = _make_run(tmp_path / "stiff", "Stiff", final_gap=0.8, snapshots=5, stiffness=5e4)
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    parallel = plot_compaction([soft, stiff], tmp_path / "parallel")
+    monkeypatch.setattr(os, "cpu_count", lambda: 1)
+    serial = plot_compaction([soft, stiff], tmp_path / "serial")
+    assert [p.name for p in parallel] == [p.name for p in serial]
+    for a, b in zip(parallel, serial, strict=True):
+        if a.name.startswith("animation"):
+            assert a.suffix == ".gif" and a.read_bytes() == b.read_bytes()
+    jobs = [(_load_run(soft), tmp_path / "a"), (_load_run(stiff), tmp_path / "b")]
+    assert _start_animations(jobs, FieldChoice()) == (None, None)  # one core: here
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    pool, started = _start_animations(jobs, FieldChoice())
+    assert pool is not None and len(started) == 2
+    assert [Path(f.result()).name for f in started] == ["a.gif", "b.gif"]
+    pool.shutdown()
 
 
 def test_one_run_uses_plain_names_and_folder_label(tmp_path: Path) -> None:

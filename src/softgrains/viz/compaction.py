@@ -8,8 +8,11 @@ A run folder holds ``series.csv`` (with ``phase``, ``phi``, ``stress_yy``, ``coo
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
 import re
 from collections.abc import Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -535,10 +538,12 @@ def _subsample(count: int, limit: int = _GIF_MAX_FRAMES) -> np.ndarray:
     return np.unique(np.linspace(0, count - 1, min(count, limit)).round().astype(int))
 
 
-def _write_animation(run: _Run, stem: Path, field: FieldChoice) -> Path:
+def _write_animation(run: _Run, stem: Path, field: FieldChoice, mp4: bool | None = None
+                     ) -> Path:
     """An animation of the snapshots (at most ~60 frames) on a fixed colour scale, with the
     time, φ/φ0 and σ/σ0 in each frame: ``stem``.mp4 when ffmpeg is available (matplotlib's
-    writer), ``stem``.gif otherwise. Returns the file written."""
+    writer; ``mp4`` decides where given), ``stem``.gif otherwise. Returns the file
+    written."""
     frames = [_read_frame(*run.snapshots[i], field) for i in _subsample(len(run.snapshots))]
     norm, extend = _field_norm(frames, field)
     figure = Figure(figsize=_GIF_SIZE, layout="constrained")
@@ -561,7 +566,7 @@ def _write_animation(run: _Run, stem: Path, field: FieldChoice) -> Path:
     figure.set_layout_engine("none")
 
     animation = FuncAnimation(figure, show, frames=len(frames), blit=False, repeat=False)
-    if FFMpegWriter.isAvailable():
+    if FFMpegWriter.isAvailable() if mp4 is None else mp4:
         path = stem.with_suffix(".mp4")
         animation.save(path, writer=FFMpegWriter(fps=_GIF_FPS, bitrate=_MP4_KBPS),
                        dpi=_MP4_DPI)
@@ -569,6 +574,29 @@ def _write_animation(run: _Run, stem: Path, field: FieldChoice) -> Path:
         path = stem.with_suffix(".gif")
         animation.save(path, writer=PillowWriter(fps=_GIF_FPS), dpi=_GIF_DPI)
     return path
+
+
+def _animation_job(folder: str, stem: str, field: FieldChoice, mp4: bool) -> str:
+    """The animation of the run in ``folder`` (in a worker process of
+    :func:`_start_animations`; ``mp4`` as this process decided)."""
+    return str(_write_animation(_load_run(folder), Path(stem), field, mp4))
+
+
+def _start_animations(jobs: list[tuple[_Run, Path]], field: FieldChoice
+                      ) -> tuple[ProcessPoolExecutor | None, list[Future] | None]:
+    """Each run's animation (``jobs``: run, file stem) started in its own process where
+    there are several and more than one core: each takes ~8 s for the reference
+    compaction's 34 snapshots, drawn in parallel with the other figures. (None, None)
+    where they are drawn in this process instead (one animation, one core, or a daemonic
+    process, which may not have children)."""
+    workers = min(len(jobs), os.cpu_count() or 1)
+    if workers < 2 or multiprocessing.current_process().daemon:
+        return None, None
+    pool = ProcessPoolExecutor(max_workers=workers,
+                               mp_context=multiprocessing.get_context("spawn"))
+    mp4 = FFMpegWriter.isAvailable()
+    return pool, [pool.submit(_animation_job, str(run.folder), str(stem), field, mp4)
+                  for run, stem in jobs]
 
 
 def _save(figure: Figure, path: Path, written: list[Path]) -> None:
@@ -611,6 +639,26 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path,
     with_snapshots = [
         (run, slug) for run, slug in zip(runs, _slugs(runs), strict=True) if run.snapshots
     ]
+    animations = [(run, out_dir / (f"animation_{slug}" if several else "animation"))
+                  for run, slug in with_snapshots]
+    pool, started = _start_animations(animations, field)
+    try:
+        _snapshot_figures(runs, with_snapshots, out_dir, field, written)
+        if started is None:
+            written += [_write_animation(run, stem, field) for run, stem in animations]
+        else:
+            written += [Path(future.result()) for future in started]
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+    return written
+
+
+def _snapshot_figures(runs: list[_Run], with_snapshots: list[tuple[_Run, str]],
+                      out_dir: Path, field: FieldChoice, written: list[Path]) -> None:
+    """The figures drawn from the snapshots, the animations aside (see
+    :func:`plot_compaction`)."""
+    several = len(runs) > 1
     for run, slug in with_snapshots:
         name = f"snapshots_{slug}.png" if several else "snapshots.png"
         _save(_snapshots_figure(run, field), out_dir / name, written)
@@ -626,7 +674,3 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path,
               written)
         if first in with_contacts and second in with_contacts:
             _save(_chains_figure(first, second), out_dir / "force_chains.png", written)
-    for run, slug in with_snapshots:
-        stem = out_dir / (f"animation_{slug}" if several else "animation")
-        written.append(_write_animation(run, stem, field))
-    return written
