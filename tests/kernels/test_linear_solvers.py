@@ -126,3 +126,58 @@ def test_a_symmetric_positive_definite_matrix_is_factorised_by_cholesky():
     np.testing.assert_allclose(Y.T @ Y, B.T @ np.linalg.solve(spd, B), rtol=1e-10)
     # a nonsymmetric matrix whose lower triangle is positive definite is not taken for one
     assert type(factorize(np.tril(spd) + 5.0 * np.triu(np.ones((n, n)), 1))) is DenseLU
+
+
+def test_the_lapack_kernels_agree_with_numpy():
+    """integrator/lapack.py (LAPACK without the GIL): Cholesky, its solves and half solve,
+    the LU and its solves, on vectors and Fortran-ordered matrices, against NumPy; a
+    matrix that is not positive definite gives potrf's info > 0, a singular one getrf's."""
+    from softgrains.integrator import lapack
+
+    rng = np.random.default_rng(4)
+    n = 17
+    B = rng.standard_normal((n, n))
+    spd = B @ B.T + n * np.eye(n)
+    b, C = rng.standard_normal(n), np.asfortranarray(rng.standard_normal((n, 3)))
+    L = np.array(spd, order="F")
+    assert lapack.cholesky(lapack.DPOTRF, L) == 0
+    np.testing.assert_allclose(np.tril(L), np.linalg.cholesky(spd), rtol=1e-12, atol=1e-12)
+    for rhs in (b.copy(), C.copy(order="F")):
+        assert lapack.cholesky_solve(lapack.DPOTRS, L, rhs) == 0
+        np.testing.assert_allclose(spd @ rhs, b if rhs.ndim == 1 else C, atol=1e-10)
+    Y = C.copy(order="F")
+    lapack.lower_solve(lapack.DTRSM, L, Y)
+    np.testing.assert_allclose(np.tril(L) @ Y, C, atol=1e-12)
+    indefinite = np.array(spd - 100.0 * n * np.eye(n), order="F")
+    assert lapack.cholesky(lapack.DPOTRF, indefinite) > 0
+    general = np.array(B + n * np.eye(n), order="F")
+    factors, pivots = general.copy(order="F"), np.zeros(n, np.int32)
+    assert lapack.lu(lapack.DGETRF, factors, pivots) == 0
+    for rhs in (b.copy(), C.copy(order="F")):
+        assert lapack.lu_solve(lapack.DGETRS, factors, pivots, rhs) == 0
+        np.testing.assert_allclose(general @ rhs, b if rhs.ndim == 1 else C, atol=1e-10)
+    singular = general.copy(order="F")
+    singular[:, 4] = 0.0
+    assert lapack.lu(lapack.DGETRF, singular, pivots) == 5
+
+
+def test_the_factorizations_run_concurrently_on_threads():
+    """The factorizations and solves release the GIL (bodies are factorised on several
+    threads): many solved on two threads at once give the serial results bit for bit."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    rng = np.random.default_rng(8)
+    matrices = []
+    for k in range(16):
+        B = rng.standard_normal((40, 40))
+        matrices.append(B @ B.T + 40 * np.eye(40) if k % 2 else B + 40 * np.eye(40))
+    rhs = rng.standard_normal((40, 5))
+
+    def solve(A):
+        return factorize(A).solve(rhs)
+
+    serial = [solve(A) for A in matrices]
+    with ThreadPoolExecutor(2) as pool:
+        threaded = list(pool.map(solve, matrices))
+    for a, b in zip(serial, threaded, strict=True):
+        np.testing.assert_array_equal(a, b)

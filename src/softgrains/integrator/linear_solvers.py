@@ -19,11 +19,8 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
-from scipy.linalg.blas import dtrsm as _TRSM
-from scipy.linalg.lapack import dgetrf as _GETRF
-from scipy.linalg.lapack import dgetrs as _GETRS
-from scipy.linalg.lapack import dpotrf as _POTRF
-from scipy.linalg.lapack import dpotrs as _POTRS
+
+from softgrains.integrator import lapack
 
 CG_MAX_ITERATIONS = 200
 CG_RELATIVE_TOLERANCE = 1e-10
@@ -83,7 +80,8 @@ class DenseCholesky:
     SuperLU's ``solve(b)`` (potrs) and the half solve ``L⁻¹ B`` (trsm), from which a
     compliance Bᵀ A⁻¹ B = (L⁻¹ B)ᵀ (L⁻¹ B) is formed symmetric and positive semidefinite by
     construction, at about half the work of the LU's two triangular solves. Build it with
-    :meth:`attempt`: None where A is not positive definite."""
+    :meth:`attempt`: None where A is not positive definite. LAPACK runs without the GIL
+    (integrator/lapack.py)."""
 
     def __init__(self, lower: np.ndarray) -> None:
         self.lower = lower
@@ -92,46 +90,60 @@ class DenseCholesky:
     def attempt(cls, matrix: np.ndarray) -> DenseCholesky | None:
         """The factorization of ``matrix`` (Fortran order, overwritten), None where a pivot
         is not positive (or not finite)."""
-        lower, info = _POTRF(matrix, lower=1, overwrite_a=True, clean=0)
-        if info != 0 or not np.all(np.isfinite(np.diagonal(lower))):
+        _fortran(matrix)
+        if lapack.cholesky(lapack.DPOTRF, matrix) != 0:
             return None
-        return cls(lower)
+        return cls(matrix)
 
     def solve(self, b: np.ndarray) -> np.ndarray:
-        x, info = _POTRS(self.lower, b, lower=1)
+        x = np.array(b, float, order="F")
+        info = lapack.cholesky_solve(lapack.DPOTRS, self.lower, x)
         if info != 0:
             raise RuntimeError(f"LAPACK potrs failed (info {info})")
         return x
 
     def half_solve(self, B: np.ndarray) -> np.ndarray:
         """L⁻¹ B (B a matrix)."""
-        return _TRSM(1.0, self.lower, B, lower=1)
+        Y = np.array(B, float, order="F")
+        lapack.lower_solve(lapack.DTRSM, self.lower, Y)
+        return Y
 
 
 class DenseLU:
     """A dense LU factorization with SuperLU's ``solve(b)`` (b a vector or a matrix): LAPACK's
-    getrf and getrs called directly (no warnings machinery, which is not thread-safe: bodies
-    are factorised on several threads, threads.over_bodies)."""
+    getrf and getrs called without the GIL (integrator/lapack.py; no warnings machinery,
+    which is not thread-safe: bodies are factorised on several threads,
+    threads.over_bodies)."""
 
     def __init__(self, A: sp.spmatrix | np.ndarray) -> None:
-        matrix = np.array(dense(A), order="F")
+        matrix = np.array(dense(A), float, order="F")
+        self.pivots = np.zeros(matrix.shape[0], np.int32)
+        self.lu = matrix
         if matrix.size == 0:  # (LAPACK refuses n = 0)
-            self.lu, self.pivots = matrix, np.zeros(0, np.int32)
             return
-        lu, self.pivots, info = _GETRF(matrix, overwrite_a=True)
+        if matrix.shape[0] != matrix.shape[1]:
+            raise ValueError(f"LU of a {matrix.shape} matrix: it must be square")
+        info = lapack.lu(lapack.DGETRF, matrix, self.pivots)
         if info < 0:
             raise ValueError(f"LAPACK getrf: argument {-info} is invalid")
-        if info > 0 or not np.all(np.isfinite(lu)):
+        if info > 0 or not np.all(np.isfinite(matrix)):
             raise RuntimeError("Factor is exactly singular")
-        self.lu = lu
 
     def solve(self, b: np.ndarray) -> np.ndarray:
+        x = np.array(b, float, order="F")
         if self.lu.size == 0:
-            return np.array(b, float)
-        x, info = _GETRS(self.lu, self.pivots, b)
+            return x
+        info = lapack.lu_solve(lapack.DGETRS, self.lu, self.pivots, x)
         if info != 0:
             raise RuntimeError(f"LAPACK getrs failed (info {info})")
         return x
+
+
+def _fortran(matrix: np.ndarray) -> None:
+    """The kernels of integrator/lapack.py read a square float64 Fortran-ordered array."""
+    if (matrix.dtype != np.float64 or not matrix.flags.f_contiguous or matrix.ndim != 2
+            or matrix.shape[0] != matrix.shape[1]):
+        raise ValueError("a square float64 matrix in Fortran order is required")
 
 
 def factorize(A: sp.spmatrix | np.ndarray):
