@@ -282,12 +282,8 @@ def test_the_mirrored_matrix_of_the_iterate_is_made_once(monkeypatch):
     assert len(calls) == 3
 
 
-def test_the_compliance_at_sites_is_the_rows_compliance_mapped():
-    """BodyStep.contact_response with a site map H (sites d × rows d): W_sites = H W_rows Hᵀ
-    and X_sites = X_rows Hᵀ (the impulse response at the sites), to round-off, where the
-    sites' columns are solved for directly (fewer than the rows' in a dense packing)."""
-    import scipy.sparse as sp
-
+def _disk_step():
+    """The first step of one free disk (D/h 10, no contact), its Newton not started."""
     from softgrains.integrator.implicit import BodyStep
 
     sim = Simulation(load_case({
@@ -298,8 +294,17 @@ def test_the_compliance_at_sites_is_the_rows_compliance_mapped():
                     "material": "gel"}],
         "output": {"progress": False},
     }))
-    step = BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
+    return BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
                     np.zeros(2), 1e-3, 0)
+
+
+def test_the_compliance_at_sites_is_the_rows_compliance_mapped():
+    """BodyStep.contact_response with a site map H (sites d × rows d): W_sites = H W_rows Hᵀ
+    and X_sites = X_rows Hᵀ (the impulse response at the sites), to round-off, where the
+    sites' columns are solved for directly (fewer than the rows' in a dense packing)."""
+    import scipy.sparse as sp
+
+    step = _disk_step()
     rng = np.random.default_rng(7)
     rows = np.sort(rng.choice(step.u.shape[0], 12, replace=False))
     H = sp.csr_matrix(rng.standard_normal((10, 24)) * (rng.random((10, 24)) < 0.3))
@@ -322,18 +327,8 @@ def test_the_compliance_by_cholesky_is_the_one_by_lu():
     import scipy.sparse as sp
 
     from softgrains.integrator import linear_solvers
-    from softgrains.integrator.implicit import BodyStep
 
-    sim = Simulation(load_case({
-        "simulation": {"dt": 1e-3, "steps": 1},
-        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
-        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
-        "bodies": [{"name": "disk", "shape": "disk", "center": [1.0, 1.0], "radius": 0.5,
-                    "material": "gel"}],
-        "output": {"progress": False},
-    }))
-    step = BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
-                    np.zeros(2), 1e-3, 0)
+    step = _disk_step()
     step.fixed[3] = True  # a fixed (Dirichlet) row among the contact rows
     rng = np.random.default_rng(11)
     rows = np.sort(np.r_[3, rng.choice(np.arange(4, step.u.shape[0]), 11, replace=False)])

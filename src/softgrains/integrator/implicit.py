@@ -489,7 +489,8 @@ class BodyStep:
         return ImpulseResponse(w, factorization, E, free, X), 0.5 * (W + W.T)
 
     def factorization(self):
-        """The LU of the current Newton matrix A (reused from a direct Newton solve)."""
+        """The factorization of the current Newton matrix A (Cholesky where A is positive
+        definite, else LU; reused from a direct Newton solve)."""
         if self._lu is None:
             if self._A is None:
                 self._A = self._matrix()
