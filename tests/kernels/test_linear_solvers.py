@@ -126,6 +126,12 @@ def test_a_symmetric_positive_definite_matrix_is_factorised_by_cholesky():
     np.testing.assert_allclose(Y.T @ Y, B.T @ np.linalg.solve(spd, B), rtol=1e-10)
     # a nonsymmetric matrix whose lower triangle is positive definite is not taken for one
     assert type(factorize(np.tril(spd) + 5.0 * np.triu(np.ones((n, n)), 1))) is DenseLU
+    # single precision and CSR input are factorised in double; the input is left as it was
+    for A in (spd.astype(np.float32), sp.csr_matrix(spd.astype(np.float32))):
+        before = A.copy()
+        x = factorize(A).solve(b)
+        np.testing.assert_allclose(spd @ x, b, atol=1e-4)
+        assert (abs(A - before)).max() == 0.0
 
 
 def test_the_lapack_kernels_agree_with_numpy():

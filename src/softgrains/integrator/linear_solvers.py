@@ -151,8 +151,9 @@ def factorize(A: sp.spmatrix | np.ndarray):
     the Cholesky factorization where A is symmetric positive definite, else the dense LU;
     above, SuperLU."""
     if A.shape[0] <= DENSE_LIMIT or not sp.issparse(A):
-        matrix = dense(A, order="F")
-        matrix = np.array(matrix, order="F", copy=matrix is A)  # (overwritten below)
+        matrix = dense(A, order="F")  # (a copy of A: overwritten below)
+        matrix = (np.array(matrix, float, order="F") if matrix is A
+                  else np.asarray(matrix, float, order="F"))
         if matrix.size and _symmetric(matrix, SYMMETRY_TOLERANCE):
             cholesky = DenseCholesky.attempt(matrix)  # (overwrites it)
             if cholesky is not None:
