@@ -187,3 +187,34 @@ def test_the_factorizations_run_concurrently_on_threads():
         threaded = list(pool.map(solve, matrices))
     for a, b in zip(serial, threaded, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_the_symmetry_test_on_blocks_agrees_with_the_dense_one():
+    """factorize tests A's symmetry from its blocks when A is BSR in canonical form (no
+    dense pass): the same answer as the dense test on a symmetric matrix, one with an
+    asymmetric entry, one with a block whose mirror is missing, and (dense test) on a BSR
+    matrix whose block columns are not sorted."""
+    from softgrains.integrator.linear_solvers import _is_symmetric, _symmetric
+
+    rng = np.random.default_rng(12)
+    n = 24
+    B = rng.standard_normal((n, n)) * (rng.random((n, n)) < 0.2)
+    S = B + B.T + n * np.eye(n)
+    asymmetric = S.copy()
+    asymmetric[3, 10] += 1e-6
+    lonely = S.copy()
+    lonely[20, 2] = lonely[21, 3] = 0.0  # the block (10, 1) without its mirror (1, 10)
+    lonely[2, 20] = 0.5
+    for M, expected in ((S, True), (asymmetric, False), (lonely, False)):
+        A = sp.bsr_matrix(M, blocksize=(2, 2))
+        A.sort_indices()  # (SciPy's conversion from dense leaves them unsorted)
+        assert A.has_canonical_format
+        dense = np.asfortranarray(M)
+        assert _is_symmetric(A, dense) == _symmetric(dense, 1e-12) == expected
+    A = sp.bsr_matrix(S, blocksize=(2, 2))
+    A.sort_indices()
+    shuffled = sp.bsr_matrix((A.data[::-1].copy(), A.indices[::-1].copy(), A.indptr),
+                             shape=A.shape)  # (row 0's blocks reversed, others moved)
+    assert not shuffled.has_canonical_format
+    assert _is_symmetric(shuffled, np.asfortranarray(shuffled.toarray())) == _symmetric(
+        np.asfortranarray(shuffled.toarray()), 1e-12)
