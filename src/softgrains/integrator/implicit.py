@@ -333,7 +333,7 @@ class BodyStep:
         self.r = self.residual(u, f_int)
         self.rnorm = self.r0 = float(np.linalg.norm(self.r))
         self.pi = self.potential(u, w_int)
-        self._A = self._lu = self._v_affine = None  # Newton matrix, its LU, v(u) map
+        self._A = self._lu = self._v_affine = None  # Newton matrix, its factorization, v(u) map
         self._A_at = None  # the iterate u (the array) _A was built at
         self._mirrored_at = None  # (u, A⁺) made by mirror_negative_modes at that u
         self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
@@ -589,9 +589,9 @@ class BodyStep:
 
     def newton_direction(self, direct: bool = False) -> np.ndarray:
         """du = −A⁻¹ R(u) with the Newton matrix at the iterate (its factorization is kept
-        for the contact response; ``direct`` asks for the LU). With ``tangent = "auto"`` a
-        failed exact-tangent solve is made again with the projected tangent, which stays for
-        the rest of the step."""
+        for the contact response; ``direct`` asks for a direct factorization, not CG). With
+        ``tangent = "auto"`` a failed exact-tangent solve is made again with the projected
+        tangent, which stays for the rest of the step."""
         try:
             return self._direction(direct)
         except SimulationError:

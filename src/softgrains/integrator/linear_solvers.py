@@ -234,7 +234,7 @@ class LinearSolver:
         self.use_direct = kind == "direct"
         self.last_method = ""
         self.last_iterations = 0
-        self.last_factorization = None  # the LU of the last direct solve (contact reuses it)
+        self.last_factorization = None  # of the last direct solve (contact reuses it)
 
     def solve(self, A: sp.bsr_matrix | np.ndarray, b: np.ndarray, diag_slot: np.ndarray,
               direct: bool = False) -> np.ndarray:
