@@ -9,6 +9,10 @@ direction), and the solve of ``--columns`` unit columns per body (its compliance
 at the contacts: ~60 for a D/h 10 grain in the dense compaction). The global system is
 solved with its right-hand sides stacked (SciPy's splu solves a dense block: each body's
 columns are zero rows for the others). Prints a table: ms per pass over all bodies.
+Session 34: also Cholesky per body (its "columns" the half solve L⁻¹B that the compliance
+BᵀA⁻¹B = (L⁻¹B)ᵀ(L⁻¹B) needs, the bodies whose A is not positive definite by LU), and
+that per-body work (factorization + half solve) on 1 and 2 threads (LAPACK called
+without the GIL, integrator/lapack.py).
 Run:  python benchmarks/newton_system_solvers.py RUN_DIR [--columns 60] [--repeat 5]
 """
 
@@ -16,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +29,7 @@ import scipy.sparse.linalg as spla
 
 from softgrains.case import load_case
 from softgrains.integrator.implicit import BodyStep
-from softgrains.integrator.linear_solvers import DenseLU
+from softgrains.integrator.linear_solvers import DenseCholesky, DenseLU, dense, factorize
 from softgrains.simulation import Simulation
 
 
@@ -77,6 +82,18 @@ def main() -> None:
              lambda m=matrices, f=factor: [f(A) for A in m],
              lambda lus=lus: [f.solve(b) for f, b in zip(lus, rhs, strict=True)],
              lambda lus=lus: [f.solve(c) for f, c in zip(lus, columns, strict=True)])
+    chol = [factorize(A) for A in mats]
+    spd = sum(isinstance(f, DenseCholesky) for f in chol)
+
+    def half_solves(factors=chol):
+        return [f.half_solve(c) if isinstance(f, DenseCholesky) else f.solve(c)
+                for f, c in zip(factors, columns, strict=True)]
+
+    _row(f"Cholesky per body ({spd} of {len(mats)} positive definite; else LU), columns "
+         "by half solve", sum(n * n for n in sizes), args.repeat,
+         lambda: [factorize(A) for A in mats],
+         lambda: [f.solve(b) for f, b in zip(chol, rhs, strict=True)], half_solves)
+    _threads(mats, columns, args.repeat)
     block = sp.block_diag(csc, format="csc")
     stacked = np.concatenate(rhs)
     stacked_columns = sp.block_diag([sp.csc_matrix(c) for c in columns]).toarray()
@@ -85,6 +102,28 @@ def main() -> None:
         _row(f"one SuperLU, block diagonal ({ordering})", lu.L.nnz + lu.U.nnz, args.repeat,
              lambda o=ordering: spla.splu(block, permc_spec=o),
              lambda lu=lu: lu.solve(stacked), lambda lu=lu: lu.solve(stacked_columns))
+
+
+def _threads(mats: list, columns: list, repeat: int) -> None:
+    """Each body's factorization and half solve (Cholesky, else LU and solve), its dense
+    copy made beforehand, on 1 and 2 Python threads: ms per pass, and the ratio."""
+    dense_copies = [np.asfortranarray(dense(A)) for A in mats]
+
+    def body(k: int) -> None:
+        matrix = dense_copies[k].copy(order="F")
+        cholesky = DenseCholesky.attempt(matrix)
+        if cholesky is not None:
+            cholesky.half_solve(columns[k])
+        else:
+            DenseLU(dense_copies[k]).solve(columns[k])
+
+    timings = {}
+    for threads in (1, 2):
+        with ThreadPoolExecutor(threads) as pool:
+            timings[threads] = _best(lambda p=pool: list(p.map(body, range(len(mats)))),
+                                     repeat)
+    print(f"\nfactorization + half solve of every body: 1 thread {timings[1]:.1f} ms, "
+          f"2 threads {timings[2]:.1f} ms (×{timings[1] / timings[2]:.2f})\n")
 
 
 def _row(name: str, fill: int, repeat: int, factorize, solve_one, solve_columns) -> None:
