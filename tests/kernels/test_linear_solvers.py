@@ -116,14 +116,22 @@ def test_a_symmetric_positive_definite_matrix_is_factorised_by_cholesky():
     nonsymmetric = spd + 0.01 * np.triu(rng.standard_normal((n, n)), 1)
     b, B = rng.standard_normal(n), rng.standard_normal((n, 4))
     for A, kind in ((spd, DenseCholesky), (indefinite, DenseLU), (nonsymmetric, DenseLU),
-                    (sp.bsr_matrix(spd, blocksize=(2, 2)), DenseCholesky)):
+                    (sp.bsr_matrix(spd, blocksize=(2, 2)), DenseCholesky),
+                    (sp.bsr_matrix(indefinite, blocksize=(2, 2)), DenseLU),
+                    (sp.bsr_matrix(nonsymmetric, blocksize=(2, 2)), DenseLU)):
+        before = A.copy()
         f = factorize(A)
         assert type(f) is kind
         dense = A.toarray() if sp.issparse(A) else A
         np.testing.assert_allclose(dense @ f.solve(b), b, atol=1e-10)
         np.testing.assert_allclose(dense @ f.solve(B), B, atol=1e-10)
+        assert abs(A - before).max() == 0.0  # the input is left as it was
     Y = factorize(spd).half_solve(B)
     np.testing.assert_allclose(Y.T @ Y, B.T @ np.linalg.solve(spd, B), rtol=1e-10)
+    # the compliance α Bᵀ A⁻¹ B by syrk: exactly symmetric
+    W = factorize(spd).compliance(B, 2.5)
+    np.testing.assert_allclose(W, 2.5 * B.T @ np.linalg.solve(spd, B), rtol=1e-10)
+    assert np.array_equal(W, W.T)
     # a nonsymmetric matrix whose lower triangle is positive definite is not taken for one
     assert type(factorize(np.tril(spd) + 5.0 * np.triu(np.ones((n, n)), 1))) is DenseLU
     # single precision and CSR input are factorised in double; the input is left as it was

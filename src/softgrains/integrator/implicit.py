@@ -162,14 +162,17 @@ class ImpulseResponse:
         return X
 
 
-def line_search(u, du, r, pi, internal_force, residual, potential):
+def line_search(u, du, r, pi, internal_force, residual, potential, enough=0.0):
     """Backtracking along the Newton direction: u + α du, α = 1, ½, ¼, ...
 
     The step equations are the stationarity of the incremental potential Π (R = ∇Π), so
     the first α with no inverted point and either the Armijo decrease
     Π(u + α du) ≤ Π(u) + 10⁻⁴ α R·du or a residual decrease ‖R‖ ≤ (1 − 10⁻⁴ α)‖R(u)‖ is
     taken (the second test decides near convergence, where differences of Π drown in
-    round-off). If du is no descent direction (R·du ≥ 0) or no α within
+    round-off), or a trial whose ‖R‖ is within ``enough`` (the body's stopping threshold:
+    it is converged there; a converged body moved only by impulse changes of ~1e-15 h
+    otherwise had every trial refused, took 1/256 of its step and held the contact loop
+    for ~10 iterations a step, session 35). If du is no descent direction (R·du ≥ 0) or no α within
     MAX_LINE_SEARCH halvings qualifies, the admissible trial of lowest Π is taken (if every
     trial inverts a point, the last one, which the caller reports).
     """
@@ -186,7 +189,8 @@ def line_search(u, du, r, pi, internal_force, residual, potential):
             n_try = float(np.linalg.norm(r_try))
             trial = (u_try, f_try, r_try, n_try, j_try, pi_try)
             armijo = slope < 0.0 and pi_try <= pi + 1e-4 * alpha * slope
-            if np.isfinite(n_try) and (armijo or n_try <= (1.0 - 1e-4 * alpha) * rnorm):
+            if np.isfinite(n_try) and (armijo or n_try <= max((1.0 - 1e-4 * alpha) * rnorm,
+                                                              enough)):
                 return trial
             if np.isfinite(n_try) and (best is None or pi_try < best[5]):
                 best = trial
@@ -332,8 +336,11 @@ class BodyStep:
         self.u, self.jmin = u, jmin
         self.r = self.residual(u, f_int)
         self.rnorm = self.r0 = float(np.linalg.norm(self.r))
+        # the stopping threshold of the last convergence test (residual_ratio)
+        self._threshold = max(st.tolerance * self.r0, self.floor)
         self.pi = self.potential(u, w_int)
         self._A = self._lu = self._v_affine = None  # Newton matrix, its factorization, v(u) map
+        self._bsr = None  # the Newton matrix object over self.data (newton_matrix)
         self._A_at = None  # the iterate u (the array) _A was built at
         self._mirrored_at = None  # (u, A⁺) made by mirror_negative_modes at that u
         self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
@@ -469,17 +476,17 @@ class BodyStep:
         if not delassus:
             W = np.diag(1.0 / self.m[rows].ravel() * free[dofs])
             return None, W
+        # (Fortran order: the solves' right-hand sides are copied from it as they are)
         if sites is None:
-            E = np.zeros((self.u.size, k * d))
+            E = np.zeros((self.u.size, k * d), order="F")
             E[dofs, np.arange(k * d)] = free[dofs]
         else:
-            E = np.zeros((self.u.size, sites.shape[0]))
+            E = np.zeros((self.u.size, sites.shape[0]), order="F")
             E[dofs] = sites.T.toarray() * free[dofs, None]
         factorization = self.factorization()
         if isinstance(factorization, DenseCholesky):
-            Y = factorization.half_solve(E)
-            W = (kappa * w) * (Y.T @ Y)
-            return ImpulseResponse(w, factorization, E, free), 0.5 * (W + W.T)
+            W = factorization.compliance(E, kappa * w)
+            return ImpulseResponse(w, factorization, E, free), W
         X = factorization.solve(E) * w
         X[~free] = 0.0
         W = kappa * X[dofs] if sites is None else kappa * (sites @ X[dofs])
@@ -543,7 +550,8 @@ class BodyStep:
     def residual_ratio(self, floor: float = 0.0) -> float:
         """‖R‖ over the stopping threshold max(tol ‖R_0‖, the round-off floor, ``floor``):
         ≤ 1 when converged."""
-        return self.rnorm / max(self.settings.tolerance * self.r0, self.floor, floor, 1e-300)
+        self._threshold = max(self.settings.tolerance * self.r0, self.floor, floor, 1e-300)
+        return self.rnorm / self._threshold
 
     def _node_and_point(self, row: int) -> tuple[np.ndarray, int]:
         """Position of active ``row``'s node and the body's point nearest to it."""
@@ -569,7 +577,8 @@ class BodyStep:
             self.newton_update()
 
     def newton_matrix(self) -> sp.bsr_matrix:
-        """A = c_m M + s K_T(u) at the current iterate, Dirichlet rows and columns unit."""
+        """A = c_m M + s K_T(u) at the current iterate, Dirichlet rows and columns unit (one
+        matrix object over the step's tangent array: the next call overwrites its values)."""
         self.internal_force(self.u, True)
         data = self.data
         if self.s_f != 1.0:
@@ -579,8 +588,13 @@ class BodyStep:
         else:
             add_diagonal(data, self.diag_slot, (self.m * self.c_m).ravel())
         constrain(data, self.indptr, self.indices, self.fixed.ravel())
-        size = self.u.size
-        return sp.bsr_matrix((data, self.indices, self.indptr), shape=(size, size))
+        if self._bsr is None:
+            # one matrix object over ``data`` for the step (its pattern does not change;
+            # SciPy's checks on construction were ~2% of a compaction run, session 35): the
+            # matrix returned is the latest one built
+            size = self.u.size
+            self._bsr = sp.bsr_matrix((data, self.indices, self.indptr), shape=(size, size))
+        return self._bsr
 
     def newton_update(self) -> None:
         """One Newton iteration: tangent, linear solve, line search (with ``tangent =
@@ -621,7 +635,8 @@ class BodyStep:
         self.result.iterations += 1
         before = (self.u, self.r, self.rnorm, self.jmin, self.pi)
         self.u, _, self.r, self.rnorm, self.jmin, self.pi = line_search(
-            self.u, du, self.r, self.pi, self.internal_force, self.residual, self.potential)
+            self.u, du, self.r, self.pi, self.internal_force, self.residual, self.potential,
+            self._threshold)
         if self.jmin <= 0.0 and self.use_projected_tangent():
             self.u, self.r, self.rnorm, self.jmin, self.pi = before
 

@@ -35,12 +35,14 @@ DPOTRF = _routine("lapack", "dpotrf", 5)
 DPOTRS = _routine("lapack", "dpotrs", 8)
 # (side, uplo, transa, diag, m, n, alpha, a, lda, b, ldb)
 DTRSM = _routine("blas", "dtrsm", 11)
+# (uplo, trans, n, k, alpha, a, lda, beta, c, ldc)
+DSYRK = _routine("blas", "dsyrk", 10)
 # (m, n, a, lda, ipiv, info)
 DGETRF = _routine("lapack", "dgetrf", 6)
 # (trans, n, nrhs, a, lda, ipiv, b, ldb, info)
 DGETRS = _routine("lapack", "dgetrs", 9)
 
-_LOWER, _LEFT, _NO, _NOT_UNIT = ord("L"), ord("L"), ord("N"), ord("N")
+_LOWER, _LEFT, _NO, _NOT_UNIT, _TRANSPOSED = ord("L"), ord("L"), ord("N"), ord("N"), ord("T")
 
 
 @njit(cache=True, nogil=True)
@@ -115,3 +117,19 @@ def lu_solve(getrs, factors, pivots, b):
           factors.ctypes.data, ints[2:3].ctypes.data, pivots.ctypes.data, b.ctypes.data,
           ints[3:4].ctypes.data, ints[4:5].ctypes.data)
     return ints[4]
+
+
+@njit(cache=True, nogil=True)
+def gram(syrk, y, alpha, out):
+    """out ← α yᵀy (y Fortran-ordered, n × k; out k × k): the lower triangle by syrk
+    (half of the product's work), the upper copied from it, so out is exactly symmetric."""
+    n, k = y.shape
+    chars = np.array([_LOWER, _TRANSPOSED], np.uint8)
+    ints = np.array([k, n, max(n, 1), max(k, 1)], np.int32)  # n, k, lda, ldc (BLAS names)
+    scalars = np.array([alpha, 0.0])
+    syrk(chars[0:1].ctypes.data, chars[1:2].ctypes.data, ints[0:1].ctypes.data,
+         ints[1:2].ctypes.data, scalars[0:1].ctypes.data, y.ctypes.data, ints[2:3].ctypes.data,
+         scalars[1:2].ctypes.data, out.ctypes.data, ints[3:4].ctypes.data)
+    for j in range(k):  # out is Fortran-ordered: out[i, j], i ≥ j, is the lower triangle
+        for i in range(j + 1, k):
+            out[j, i] = out[i, j]
