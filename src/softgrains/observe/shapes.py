@@ -45,13 +45,15 @@ class GrainShape:
 
 
 def grain_outline(x: np.ndarray, F: np.ndarray, side: np.ndarray,
-                  pixels_per_spacing: int = PIXELS_PER_SPACING) -> np.ndarray:
+                  pixels_per_spacing: int = PIXELS_PER_SPACING,
+                  subpixels: int = SUBPIXELS) -> np.ndarray:
     """The outline (m, 2) of one grain: the longest closed line at half the grain's median
     coverage (½ where the cells tile) of its points' deformed cells F_p·[−s_p/2, s_p/2]²
     (s_p = ``side``) rastered at δ/8, averaged to an image of δ/4
-    (δ/``pixels_per_spacing``) and blurred over σ = δ (δ the median side). The enclosed
-    area is within 1% of Σ V_p for disks of radius ≥ 5δ (lattice or rings seeding); below
-    that the blur dominates (radius 3δ: 12% large for lattice cells, 21% for rings)."""
+    (δ/``pixels_per_spacing``; the raster ``subpixels`` times finer) and blurred over
+    σ = δ (δ the median side). The enclosed area is within 1% of Σ V_p for disks of
+    radius ≥ 5δ (lattice or rings seeding); below that the blur dominates (radius 3δ: 12%
+    large for lattice cells, 21% for rings)."""
     if x.shape[1] != 2:
         raise NotImplementedError("grain outlines are written for 2D")
     side = np.asarray(side, float)
@@ -61,7 +63,7 @@ def grain_outline(x: np.ndarray, F: np.ndarray, side: np.ndarray,
     pad = reach + 4.0 * BLUR_SPACINGS * spacing
     lower = x.min(axis=0) - pad
     nx, ny = (int(np.ceil(s / pixel)) + 1 for s in (x.max(axis=0) + pad - lower))
-    fine, k = pixel / SUBPIXELS, SUBPIXELS
+    fine, k = pixel / subpixels, subpixels
     covered = np.zeros(nx * k * ny * k, np.int32)
     last = np.full(covered.size, -1, np.int64)
     squares = lattice_cells(side**2).shape  # (the cells as squares of side s_p)

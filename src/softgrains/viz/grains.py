@@ -25,7 +25,8 @@ from scipy.spatial import Delaunay, cKDTree
 from softgrains.observe.shapes import grain_outline
 
 OUTLINE_SPACING = 0.5  # outline vertices kept for the triangulation, in point spacings
-OUTLINE_PIXELS = 4  # raster pixels per point spacing for a drawn outline (shapes use 8)
+OUTLINE_PIXELS = 4  # raster pixels per point spacing for a drawn outline (the shape
+# descriptors average a raster twice as fine: observe/shapes.py)
 _EDGE_COLOR = "black"
 _EDGE_WIDTH = 0.4
 _WALL_COLOR = "0.6"
@@ -82,7 +83,7 @@ def _grain_points(points: GrainPoints):
 def _outline(points: GrainPoints, index: np.ndarray) -> np.ndarray:
     """The drawn outline of the grain made of the points ``index``."""
     return grain_outline(points.positions[index], points.F[index], points.side[index],
-                         OUTLINE_PIXELS)
+                         OUTLINE_PIXELS, subpixels=1)
 
 
 def grain_outlines(points: GrainPoints) -> list[np.ndarray]:
