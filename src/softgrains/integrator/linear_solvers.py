@@ -207,7 +207,7 @@ def factorize(A: sp.spmatrix | np.ndarray):
             cholesky = DenseCholesky.attempt(rows.T)  # (overwrites it)
             if cholesky is not None:
                 return cholesky
-            return DenseLU(_rows_copy(A).T, overwrite=True)
+            return DenseLU(A)  # (A itself, not Aᵀ: equal only to the symmetry tolerance)
         return DenseLU(np.asfortranarray(rows), overwrite=True)
     return spla.splu(A.tocsc(), permc_spec="MMD_AT_PLUS_A")
 
