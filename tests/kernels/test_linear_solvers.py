@@ -188,13 +188,16 @@ def test_the_factorizations_run_concurrently_on_threads():
     rhs = rng.standard_normal((40, 5))
 
     def solve(A):
-        return factorize(A).solve(rhs)
+        f = factorize(A)  # and the compliance (syrk) where A is positive definite
+        return f.solve(rhs), (f.compliance(rhs, 0.5) if isinstance(f, DenseCholesky)
+                              else np.zeros((5, 5)))
 
     serial = [solve(A) for A in matrices]
     with ThreadPoolExecutor(2) as pool:
         threaded = list(pool.map(solve, matrices))
-    for a, b in zip(serial, threaded, strict=True):
+    for (a, w), (b, v) in zip(serial, threaded, strict=True):
         np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(w, v)
 
 
 def test_the_symmetry_test_on_blocks_agrees_with_the_dense_one():
