@@ -21,23 +21,14 @@ docs/dev-notes.md, Next steps for #11, 0a).
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import time
-from pathlib import Path
 
 import numpy as np
+from squeeze_convergence import squeeze_case
 
 import softgrains.integrator.implicit as implicit
 from softgrains import Simulation, load_case
 from softgrains.integrator.linear_solvers import dense
-
-
-def _squeeze_case(d_over_h: int, dt_c_over_h: float) -> dict:
-    path = Path(__file__).parent / "squeeze_convergence.py"
-    spec = importlib.util.spec_from_file_location("squeeze_convergence", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.squeeze_case(d_over_h, dt_c_over_h, 0.1)
 
 
 def rotation(step: implicit.BodyStep) -> np.ndarray:
@@ -69,7 +60,7 @@ def main() -> None:
     parser.add_argument("--dtch", type=float, default=3000.0)
     parser.add_argument("--steps", type=int, default=8, help="steps analysed (then run on)")
     args = parser.parse_args()
-    sim = Simulation(load_case(_squeeze_case(args.dh, args.dtch)))
+    sim = Simulation(load_case(squeeze_case(args.dh, args.dtch, 0.1)))
     if sim.model.dim != 2:
         raise SystemExit("the rotation mode is written for 2D")
     seen: set[int] = set()

@@ -172,9 +172,9 @@ def line_search(u, du, r, pi, internal_force, residual, potential, enough=0.0):
     round-off), or a trial whose ‖R‖ is within ``enough`` (the body's stopping threshold:
     it is converged there; a converged body moved only by impulse changes of ~1e-15 h
     otherwise had every trial refused, took 1/256 of its step and held the contact loop
-    for ~10 iterations a step, session 35). If du is no descent direction (R·du ≥ 0) or no α within
-    MAX_LINE_SEARCH halvings qualifies, the admissible trial of lowest Π is taken (if every
-    trial inverts a point, the last one, which the caller reports).
+    for ~10 iterations a step, session 35). If du is no descent direction (R·du ≥ 0) or
+    no α within MAX_LINE_SEARCH halvings qualifies, the admissible trial of lowest Π is
+    taken (if every trial inverts a point, the last one, which the caller reports).
     """
     slope = float(np.sum(r * du))
     rnorm = float(np.linalg.norm(r))
@@ -337,7 +337,7 @@ class BodyStep:
         self.r = self.residual(u, f_int)
         self.rnorm = self.r0 = float(np.linalg.norm(self.r))
         # the stopping threshold of the last convergence test (residual_ratio)
-        self._threshold = max(st.tolerance * self.r0, self.floor)
+        self._threshold = self._stopping_threshold()
         self.pi = self.potential(u, w_int)
         self._A = self._lu = self._v_affine = None  # Newton matrix, its factorization, v(u) map
         self._bsr = None  # the Newton matrix object over self.data (newton_matrix)
@@ -550,8 +550,12 @@ class BodyStep:
     def residual_ratio(self, floor: float = 0.0) -> float:
         """‖R‖ over the stopping threshold max(tol ‖R_0‖, the round-off floor, ``floor``):
         ≤ 1 when converged."""
-        self._threshold = max(self.settings.tolerance * self.r0, self.floor, floor, 1e-300)
+        self._threshold = self._stopping_threshold(floor)
         return self.rnorm / self._threshold
+
+    def _stopping_threshold(self, floor: float = 0.0) -> float:
+        """max(tol ‖R_0‖, the round-off floor, ``floor``)."""
+        return max(self.settings.tolerance * self.r0, self.floor, floor, 1e-300)
 
     def _node_and_point(self, row: int) -> tuple[np.ndarray, int]:
         """Position of active ``row``'s node and the body's point nearest to it."""

@@ -49,14 +49,14 @@ def _bsr_to_dense(indptr, indices, data, out):
                     out[i * d + a, j * d + b] += data[k, a, b]
 
 
-def dense(A: sp.spmatrix | np.ndarray, order: str = "C") -> np.ndarray:
+def dense(A: sp.spmatrix | np.ndarray) -> np.ndarray:
     """A as a dense array (a BSR matrix of square blocks by a kernel that releases the
-    GIL; ``order`` that of a new array)."""
+    GIL)."""
     if isinstance(A, sp.bsr_matrix) and A.blocksize[0] == A.blocksize[1]:
-        out = np.empty(A.shape, order=order)
+        out = np.empty(A.shape)
         _bsr_to_dense(A.indptr, A.indices, A.data, out)
         return out
-    return A.toarray(order=order) if sp.issparse(A) else A
+    return A.toarray() if sp.issparse(A) else A
 
 
 @njit(cache=True, nogil=True)
