@@ -12,7 +12,9 @@ import platform
 import signal
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
 
@@ -145,18 +147,32 @@ def _run(args: argparse.Namespace) -> int:
         raise CaseError(f"several cases have the same file name ({stems}): each runs into "
                         "DIR/<file name>; rename them")
     outs = [root / stem for stem in stems]
-    jobs = args.jobs or min(len(cases), os.cpu_count() or 1)
-    statuses = _run_parallel(args.cases, args.overrides, outs, max(1, jobs), args.resume)
-    done = [out for out, status in zip(outs, statuses, strict=True) if status == EXIT_OK]
-    if args.figures:
-        # a failed run's rows up to its failure are valid: draw them too when they can be
-        written = [out for out in outs if (out / "series.csv").is_file()]
+    jobs = max(1, min(args.jobs or min(len(cases), os.cpu_count() or 1), len(cases)))
+    with _worker_pool(jobs) as pool:
+        animations = None
+        if args.figures:  # each run's animation drawn as it ends, on the core it frees
+            from softgrains.viz.compaction import AnimationQueue  # heavy: matplotlib
+
+            animations = AnimationQueue(pool, root / "figures")
         try:
-            _draw(written, root / "figures")
-        except CaseError as error:
-            _error(f"figures with every run failed ({error}); drawing the finished runs")
-            if done:
-                _draw(done, root / "figures")
+            statuses = _run_parallel(pool, jobs, args.cases, args.overrides, outs, args.resume,
+                                     animations.start if animations is not None else None)
+            done = [out for out, status in zip(outs, statuses, strict=True)
+                    if status == EXIT_OK]
+            if args.figures:
+                # a failed run's rows up to its failure are valid: draw them too when they
+                # can be
+                written = [out for out in outs if (out / "series.csv").is_file()]
+                try:
+                    _draw(written, root / "figures", animations)
+                except CaseError as error:
+                    _error(f"figures with every run failed ({error}); drawing the finished "
+                           "runs")
+                    if done:
+                        _draw(done, root / "figures", animations)
+        finally:
+            if animations is not None:
+                animations.close()
     return max(statuses)
 
 
@@ -178,36 +194,50 @@ def _run_one(case, out: Path, resume: bool = False) -> int:
     return EXIT_OK
 
 
-def _run_parallel(paths: list[Path], overrides: list[str], outs: list[Path],
-                  jobs: int, resume: bool = False) -> list[int]:
-    """Run the cases in ``jobs`` processes, the cores shared among them (no progress bars:
-    each run writes its run.log; one line per case here when it ends)."""
+@contextmanager
+def _worker_pool(jobs: int) -> Iterator[ProcessPoolExecutor]:
+    """``jobs`` worker processes (spawned: no threads or Numba state inherited); what is
+    still queued when the block is left is cancelled."""
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
-    threads = max(1, (os.cpu_count() or 1) // min(jobs, len(paths)))
-    print(f"running {len(paths)} cases, {min(jobs, len(paths))} at once, {threads} "
+    pool = ProcessPoolExecutor(max_workers=jobs,
+                               mp_context=multiprocessing.get_context("spawn"))
+    try:
+        yield pool
+    finally:
+        pool.shutdown(cancel_futures=True)
+
+
+def _run_parallel(pool: ProcessPoolExecutor, jobs: int, paths: list[Path],
+                  overrides: list[str], outs: list[Path], resume: bool = False,
+                  on_done: Callable[[Path], object] | None = None) -> list[int]:
+    """Run the cases in ``pool``'s ``jobs`` processes, the cores shared among them (no progress
+    bars: each run writes its run.log; one line per case here as it ends, and
+    ``on_done(out)`` called for each that completed). Returns the exit statuses in the
+    order of ``paths``."""
+    threads = max(1, (os.cpu_count() or 1) // jobs)
+    print(f"running {len(paths)} cases, {jobs} at once, {threads} "
           f"thread(s) each; logs in {', '.join(str(o / 'run.log') for o in outs)}")
-    context = multiprocessing.get_context("spawn")
     # SIGTERM sent to this process alone (kill, a batch system) is passed on to the
     # workers, which stop cleanly after their step; SIGINT from a terminal reaches them
     # all already (one process group)
     forwarding = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _forward_to_workers) if forwarding else None
     try:
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-            futures = [pool.submit(run_case, str(p), list(overrides), str(o), threads,
-                                   resume)
-                       for p, o in zip(paths, outs, strict=True)]
-            statuses = []
-            for path, out, future in zip(paths, outs, futures, strict=True):
-                status, message = future.result()
-                outcome = (("done" if not message else "done, with warnings")
-                           if status == EXIT_OK else "interrupted" if status > 128
-                           else "invalid case" if status == EXIT_INVALID else "FAILED")
-                print(f"{path}: {outcome} -> {out}"
-                      + (f"\n  {message}" if message else ""))
-                statuses.append(status)
+        futures = {pool.submit(run_case, str(p), list(overrides), str(o), threads, resume): i
+                   for i, (p, o) in enumerate(zip(paths, outs, strict=True))}
+        statuses = [EXIT_FAILED] * len(paths)
+        for future in as_completed(futures):
+            i = futures[future]
+            status, message = future.result()
+            outcome = (("done" if not message else "done, with warnings")
+                       if status == EXIT_OK else "interrupted" if status > 128
+                       else "invalid case" if status == EXIT_INVALID else "FAILED")
+            print(f"{paths[i]}: {outcome} -> {outs[i]}" + (f"\n  {message}" if message else ""),
+                  flush=True)
+            statuses[i] = status
+            if status == EXIT_OK and on_done is not None:
+                on_done(outs[i])
     finally:
         if forwarding:
             signal.signal(signal.SIGTERM, previous)
@@ -239,10 +269,10 @@ def _sweep(args: argparse.Namespace) -> int:
     return max((o.code for o in outcomes), default=EXIT_OK)
 
 
-def _draw(run_dirs: list[Path], out: Path | None) -> None:
+def _draw(run_dirs: list[Path], out: Path | None, animations=None) -> None:
     from softgrains.viz import draw_figures  # heavy: matplotlib
 
-    written = draw_figures(run_dirs, out)
+    written = draw_figures(run_dirs, out, animations=animations)
     folders = sorted({str(path.parent) for path in written})
     print(f"{len(written)} figures in {', '.join(folders)}")
 

@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import csv
 import json
+import multiprocessing
 import os
+from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +18,7 @@ from PIL import Image
 from softgrains.errors import CaseError
 from softgrains.io.vtk import PvdSeries, write_points_vtu
 from softgrains.viz.compaction import (
+    AnimationQueue,
     FieldChoice,
     _load_run,
     _phi_sigma_figure,
@@ -188,6 +191,36 @@ def test_animations_drawn_in_worker_processes_are_those_drawn_here(tmp_path: Pat
     assert pool is not None and len(started) == 2
     assert [Path(f.result()).name for f in started] == ["a.gif", "b.gif"]
     pool.shutdown()
+
+
+def test_animations_queued_as_runs_finish_are_the_serial_ones(tmp_path: Path,
+                                                               monkeypatch) -> None:
+    """`softgrains run A B`: a run's animation is started in the runs' pool as soon as the
+    run ends (AnimationQueue.start), before the other runs are known; plot_compaction then
+    names it and draws the rest. The files are those of the serial drawing byte for byte,
+    nothing provisional is left behind, and an animation no figure claims is removed."""
+    soft = _make_run(tmp_path / "soft", "Soft μ=0.3", stiffness=1e4)
+    stiff = _make_run(tmp_path / "stiff", "Stiff", final_gap=0.8, snapshots=5, stiffness=5e4)
+    monkeypatch.setattr(os, "cpu_count", lambda: 1)
+    serial = plot_compaction([soft, stiff], tmp_path / "serial")
+    out = tmp_path / "queued"
+    spawn = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(max_workers=2, mp_context=spawn) as pool:
+        queue = AnimationQueue(pool, out)
+        queue.mp4 = False  # as decided in the serial drawing, where ffmpeg is hidden
+        assert queue.start(stiff) and queue.start(stiff)  # the second call: already started
+        assert not queue.start(tmp_path / "missing")  # unusable: left to plot_compaction
+        queued = plot_compaction([soft, stiff], out, animations=queue)
+        assert [p.name for p in queued] == [p.name for p in serial]
+        for a, b in zip(queued, serial, strict=True):
+            if a.name.startswith("animation"):
+                assert a.read_bytes() == b.read_bytes()
+        assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+        queue.start(soft)  # a drawing nobody claims
+        queue.close()
+        assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+        with pytest.raises(ValueError, match="shaded by"):
+            plot_compaction([soft], out, FieldChoice("pressure"), animations=queue)
 
 
 def test_one_run_uses_plain_names_and_folder_label(tmp_path: Path) -> None:

@@ -11,6 +11,7 @@ import json
 import multiprocessing
 import os
 import re
+import signal
 from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
@@ -578,8 +579,15 @@ def _write_animation(run: _Run, stem: Path, field: FieldChoice, mp4: bool | None
 
 def _animation_job(folder: str, stem: str, field: FieldChoice, mp4: bool) -> str:
     """The animation of the run in ``folder`` (in a worker process of
-    :func:`_start_animations`; ``mp4`` as this process decided)."""
-    return str(_write_animation(_load_run(folder), Path(stem), field, mp4))
+    :func:`_start_animations` or an :class:`AnimationQueue`; ``mp4`` as the caller
+    decided). SIGTERM is ignored while it draws: a worker it killed would break the pool
+    and with it the runs still going in the pool's other workers, which stop cleanly on
+    SIGTERM (cli.py forwards it to them)."""
+    previous = signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        return str(_write_animation(_load_run(folder), Path(stem), field, mp4))
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _start_animations(jobs: list[tuple[_Run, Path]], field: FieldChoice
@@ -599,6 +607,56 @@ def _start_animations(jobs: list[tuple[_Run, Path]], field: FieldChoice
                   for run, stem in jobs]
 
 
+class AnimationQueue:
+    """Animations drawn in a caller's process pool as the runs finish (``softgrains run A
+    B``: a finished run's animation is drawn on the core it frees while the other runs go
+    on). Each is drawn under a provisional name in ``out_dir`` and renamed by
+    :func:`plot_compaction`, which decides the final names once every run is known (an
+    animation depends only on its own run and the field, not on the other runs)."""
+
+    def __init__(self, pool: ProcessPoolExecutor, out_dir: str | Path,
+                 field: FieldChoice = DEFAULT_FIELD) -> None:
+        self.pool, self.out_dir, self.field = pool, Path(out_dir), field
+        self.mp4 = FFMpegWriter.isAvailable()
+        self._started: dict[Path, Future] = {}
+
+    def start(self, folder: str | Path) -> bool:
+        """Start the animation of the finished run in ``folder`` unless it is started or
+        unusable (no compaction rows, no snapshots: then :func:`plot_compaction` decides,
+        and reports what is wrong). Returns whether it is under way."""
+        folder = Path(folder).resolve()
+        if folder in self._started:
+            return True
+        try:
+            run = _load_run(folder)
+        except CaseError:
+            return False
+        if not run.snapshots:
+            return False
+        self.out_dir.mkdir(parents=True, exist_ok=True)
+        provisional = self.out_dir / f".animation-{len(self._started)}.partial"
+        self._started[folder] = self.pool.submit(_animation_job, str(folder),
+                                                 str(provisional), self.field, self.mp4)
+        return True
+
+    def finish(self, folder: str | Path, stem: Path) -> Path:
+        """Wait for the animation of ``folder`` (started now if it was not) and move it to
+        ``stem`` with its format's suffix; returns the file."""
+        self.start(folder)
+        drawn = Path(self._started.pop(Path(folder).resolve()).result())
+        return drawn.replace(stem.with_suffix(drawn.suffix))
+
+    def close(self) -> None:
+        """Remove the animations no figure claimed (a run :func:`plot_compaction` was not
+        given), after they are drawn."""
+        for future in self._started.values():
+            try:
+                Path(future.result()).unlink(missing_ok=True)
+            except Exception:  # noqa: BLE001 - a failed, unclaimed drawing leaves no file
+                pass
+        self._started.clear()
+
+
 def _save(figure: Figure, path: Path, written: list[Path]) -> None:
     """Save ``figure`` to ``path`` and record it."""
     figure.savefig(path, dpi=_DPI)
@@ -606,7 +664,8 @@ def _save(figure: Figure, path: Path, written: list[Path]) -> None:
 
 
 def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path,
-                    field: FieldChoice = DEFAULT_FIELD) -> list[Path]:
+                    field: FieldChoice = DEFAULT_FIELD,
+                    animations: AnimationQueue | None = None) -> list[Path]:
     """Draw the figures of one or more compaction runs into ``out_dir``.
 
     Writes ``phi_sigma.png`` (against the top wall's σ_yy), ``phi_sigma_average.png`` (against
@@ -618,8 +677,13 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path,
     (P(f/⟨f⟩) at a few stress levels); for the first two runs with snapshots,
     ``side_by_side.png`` and ``force_chains.png`` at the same wall strain. Every run is
     checked before anything is written (an unusable folder raises :class:`CaseError`).
+    The animations are drawn by ``animations`` where given (some perhaps already drawn;
+    its field must be ``field``), else in processes of their own (:func:`_start_animations`).
     Returns the paths written.
     """
+    if animations is not None and animations.field != field:
+        raise ValueError(f"plot_compaction: the animations are shaded by "
+                         f"{animations.field.name}, the figures by {field.name}")
     if not run_dirs:
         raise CaseError("plot_compaction: no run folders given")
     runs = [_load_run(folder) for folder in run_dirs]
@@ -639,13 +703,18 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path,
     with_snapshots = [
         (run, slug) for run, slug in zip(runs, _slugs(runs), strict=True) if run.snapshots
     ]
-    animations = [(run, out_dir / (f"animation_{slug}" if several else "animation"))
-                  for run, slug in with_snapshots]
-    pool, started = _start_animations(animations, field)
+    jobs = [(run, out_dir / (f"animation_{slug}" if several else "animation"))
+            for run, slug in with_snapshots]
+    if animations is not None:
+        for run, _ in jobs:
+            animations.start(run.folder)
+        _snapshot_figures(runs, with_snapshots, out_dir, field, written)
+        return written + [animations.finish(run.folder, stem) for run, stem in jobs]
+    pool, started = _start_animations(jobs, field)
     try:
         _snapshot_figures(runs, with_snapshots, out_dir, field, written)
         if started is None:
-            written += [_write_animation(run, stem, field) for run, stem in animations]
+            written += [_write_animation(run, stem, field) for run, stem in jobs]
         else:
             written += [Path(future.result()) for future in started]
     finally:

@@ -10,7 +10,12 @@ from pathlib import Path
 import numpy as np
 
 from softgrains.io.tables import read_table
-from softgrains.viz.compaction import DEFAULT_FIELD, FieldChoice, plot_compaction
+from softgrains.viz.compaction import (
+    DEFAULT_FIELD,
+    AnimationQueue,
+    FieldChoice,
+    plot_compaction,
+)
 from softgrains.viz.series import plot_run
 
 
@@ -27,9 +32,11 @@ def is_compaction_run(run_dir: Path) -> bool:
 
 
 def draw_figures(run_dirs: Sequence[str | Path], out_dir: str | Path | None = None,
-                 field: FieldChoice = DEFAULT_FIELD) -> list[Path]:
+                 field: FieldChoice = DEFAULT_FIELD,
+                 animations: AnimationQueue | None = None) -> list[Path]:
     """Draw every figure: RUN/figures/ per run; the compaction figures into ``out_dir``
-    (default: RUN/figures for one run), their grains shaded by ``field``. Returns the files
+    (default: RUN/figures for one run), their grains shaded by ``field``, the animations
+    by ``animations`` where given (see :func:`plot_compaction`). Returns the files
     written."""
     runs = [Path(r) for r in run_dirs]
     written: list[Path] = []
@@ -38,5 +45,5 @@ def draw_figures(run_dirs: Sequence[str | Path], out_dir: str | Path | None = No
     compaction = [r for r in runs if is_compaction_run(r)]
     if compaction:
         target = Path(out_dir) if out_dir is not None else compaction[0] / "figures"
-        written += plot_compaction(compaction, target, field)
+        written += plot_compaction(compaction, target, field, animations)
     return written
