@@ -25,6 +25,7 @@ from softgrains.contact.surfaces import (
     SurfaceContacts,
     merge,
     shape_distance,
+    stack_padded,
     surface_contacts,
     wall_contacts,
 )
@@ -88,6 +89,7 @@ class Slots:
             self.rows.append(rows)
         self.k_size = np.array([self.sites(s) for s in range(len(self.bodies))], np.int64)
         self.k_off = np.r_[0, np.cumsum(self.k_size)][:-1].astype(np.int64)
+        self._transposed: dict[int, sp.csr_matrix] = {}  # Hᵀ per slot, made on first use
         # the bodies' impulse responses (BodyStep.contact_response; None: lumped)
         self.response: list = [None] * len(body_ids)
         self.W: list[np.ndarray | None] = [None] * len(body_ids)
@@ -126,6 +128,7 @@ class Slots:
         new.a_slot, new.b_slot = renumber[new.a_slot], renumber[new.b_slot]
         new.k_size = np.array([new.sites(s) for s in range(len(new.bodies))], np.int64)
         new.k_off = np.r_[0, np.cumsum(new.k_size)][:-1].astype(np.int64)
+        new._transposed = {}
         new.response = [None] * len(new.bodies)
         new.W = [None] * len(new.bodies)
         new.semidefinite = [False] * len(new.bodies)
@@ -158,7 +161,12 @@ class Slots:
     def to_rows(self, slot: int, q: np.ndarray) -> np.ndarray:
         """Impulses q (sites, d) of body ``slot`` as impulses on its node rows, Hᵀ q."""
         H = self.H[slot]
-        return q if H is None else (H.T @ q.ravel()).reshape(-1, self.d)
+        if H is None:
+            return q
+        transposed = self._transposed.get(slot)
+        if transposed is None:  # (a new SciPy matrix object per call cost ~1% of a run)
+            transposed = self._transposed[slot] = H.T.tocsr()
+        return (transposed @ q.ravel()).reshape(-1, self.d)
 
     def compliance(self, slot: int, W: np.ndarray) -> np.ndarray:
         """The sites' compliance H W Hᵀ (per component) from the rows' W (k d × k d)."""
@@ -183,11 +191,8 @@ def _site_map(parts, first: np.ndarray, n_sites: int, d: int):
     """The distinct node rows of a body's sites and the sparse map H (sites·d × rows·d)
     with v_site = Σ_k B_k v_{row_k}."""
     width = max(st.rows.shape[1] for _c, st, *_ in parts)
-    site_rows = np.concatenate([np.pad(st.rows[c], ((0, 0), (0, width - st.rows.shape[1])),
-                                       constant_values=-1) for c, st, *_ in parts])[first]
-    site_blocks = np.concatenate([np.pad(st.blocks[c], ((0, 0), (0, width - st.rows.shape[1]),
-                                                        (0, 0), (0, 0)))
-                                  for c, st, *_ in parts])[first]
+    site_rows = stack_padded([st.rows[c] for c, st, *_ in parts], width, -1)[first]
+    site_blocks = stack_padded([st.blocks[c] for c, st, *_ in parts], width, 0.0)[first]
     rows = np.unique(site_rows[site_rows >= 0])
     s_idx, k_idx = np.nonzero(site_rows >= 0)
     cols = np.searchsorted(rows, site_rows[s_idx, k_idx])

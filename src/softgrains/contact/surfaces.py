@@ -512,13 +512,22 @@ def _concatenate(parts: list[tuple]) -> SurfaceContacts:
     """The contacts of several passes in one SurfaceContacts (rate arrays padded to the
     widest)."""
     width = max(part[11].shape[1] for part in parts)
-    padded = []
-    for part in parts:
-        rows, vec = part[11], part[12]
-        extra = width - rows.shape[1]
-        padded.append(part[:11] + (np.pad(rows, ((0, 0), (0, extra)), constant_values=-1),
-                                   np.pad(vec, ((0, 0), (0, extra), (0, 0))), part[13]))
-    return SurfaceContacts(*(np.concatenate([p[i] for p in padded]) for i in range(14)))
+    return SurfaceContacts(*(
+        stack_padded([p[i] for p in parts], width, -1 if i == 11 else 0.0) if i in (11, 12)
+        else np.concatenate([p[i] for p in parts]) for i in range(14)))
+
+
+def stack_padded(arrays: list[np.ndarray], width: int, fill) -> np.ndarray:
+    """The arrays (n_i, w_i, ...) stacked along their first axis, their second axis padded
+    with ``fill`` to ``width`` (np.pad array by array costs ~20 µs each in Python)."""
+    first = arrays[0]
+    out = np.full((sum(a.shape[0] for a in arrays), width, *first.shape[2:]), fill,
+                  first.dtype)
+    start = 0
+    for a in arrays:
+        out[start:start + a.shape[0], :a.shape[1]] = a
+        start += a.shape[0]
+    return out
 
 
 def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,

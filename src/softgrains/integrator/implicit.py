@@ -482,7 +482,7 @@ class BodyStep:
             E[dofs, np.arange(k * d)] = free[dofs]
         else:
             E = np.zeros((self.u.size, sites.shape[0]), order="F")
-            E[dofs] = sites.T.toarray() * free[dofs, None]
+            E[dofs] = sites.toarray().T * free[dofs, None]
         factorization = self.factorization()
         if isinstance(factorization, DenseCholesky):
             W = factorization.compliance(E, kappa * w)
