@@ -5,7 +5,7 @@ import pytest
 
 from softgrains.contact.detection import ContactNodes
 from softgrains.contact.problem import row_impulses
-from softgrains.contact.sites import SideStencils, Slots, subset
+from softgrains.contact.sites import SideStencils, Slots, _site_map, subset
 
 
 def _contacts_and_stencils(rng, nodal: bool, n: int = 9, d: int = 2):
@@ -79,3 +79,34 @@ def test_restricted_slots_are_the_slots_of_the_chosen_contacts(nodal):
         assert restricted.k_size.tolist() == direct.k_size.tolist()
         for body in expected:
             np.testing.assert_allclose(got[body], expected[body], rtol=1e-13, atol=1e-13)
+
+
+def test_site_map_is_the_sum_of_each_sites_stencil_blocks():
+    """_site_map (a kernel since session 36): H, in SciPy's canonical form, is the map
+    v_site = Σ_k B_k v_{row_k} built independently as a dense matrix, for sites from two
+    sides of different stencil widths, unordered stencils, padding (row −1), a row twice
+    in one site (blocks summed) and sites listed twice (``first`` picks one)."""
+    rng = np.random.default_rng(11)
+    d = 2
+    parts = []
+    for n, width in ((6, 4), (5, 2)):
+        rows = rng.integers(0, 9, (n, width))
+        rows[rng.random((n, width)) < 0.25] = -1
+        parts.append((np.arange(n), SideStencils(rows, rng.standard_normal((n, width, d, d)),
+                                                 np.zeros(n, np.int64))))
+    parts[0][1].rows[0, :2] = 7  # one row twice in a site
+    first = np.array([0, 2, 3, 4, 5, 6, 7, 9, 10])  # sites 1 and 8: duplicates left out
+    stacked = [(part[1].rows, part[1].blocks) for part in parts]
+    site_rows = np.full((11, 4), -1)
+    site_blocks = np.zeros((11, 4, d, d))
+    site_rows[:6], site_blocks[:6] = stacked[0]
+    site_rows[6:, :2], site_blocks[6:, :2] = stacked[1]
+    site_rows, site_blocks = site_rows[first], site_blocks[first]
+    rows, H = _site_map(parts, first, first.size, d)
+    np.testing.assert_array_equal(rows, np.unique(site_rows[site_rows >= 0]))
+    dense = np.zeros((first.size * d, rows.size * d))
+    for s, k in zip(*np.nonzero(site_rows >= 0), strict=True):
+        c = int(np.searchsorted(rows, site_rows[s, k]))
+        dense[s * d:(s + 1) * d, c * d:(c + 1) * d] += site_blocks[s, k]
+    assert H.has_canonical_format
+    np.testing.assert_allclose(H.toarray(), dense, rtol=1e-15, atol=1e-15)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
+from numba import njit
 
 from softgrains.contact.detection import ContactNodes, node_position
 from softgrains.contact.patches import aggregate, group
@@ -193,15 +194,68 @@ def _site_map(parts, first: np.ndarray, n_sites: int, d: int):
     width = max(st.rows.shape[1] for _c, st, *_ in parts)
     site_rows = stack_padded([st.rows[c] for c, st, *_ in parts], width, -1)[first]
     site_blocks = stack_padded([st.blocks[c] for c, st, *_ in parts], width, 0.0)[first]
-    rows = np.unique(site_rows[site_rows >= 0])
-    s_idx, k_idx = np.nonzero(site_rows >= 0)
-    cols = np.searchsorted(rows, site_rows[s_idx, k_idx])
-    blocks = site_blocks[s_idx, k_idx]
-    i, j = np.meshgrid(np.arange(d), np.arange(d), indexing="ij")
-    r = (s_idx[:, None, None] * d + i).ravel()
-    c = (cols[:, None, None] * d + j).ravel()
-    H = sp.csr_matrix((blocks.ravel(), (r, c)), shape=(n_sites * d, rows.size * d))
-    return rows, H
+    rows, data, columns, indptr = _site_map_csr(site_rows, site_blocks)
+    return rows, sp.csr_matrix((data, columns, indptr), shape=(n_sites * d, rows.size * d))
+
+
+@njit(cache=True)
+def _site_map_csr(site_rows: np.ndarray, site_blocks: np.ndarray):
+    """The distinct node rows ≥ 0 of ``site_rows`` (ascending) and H's CSR arrays: row
+    s·d + i of H holds Σ B_k[i, j] at column c·d + j over site s's stencil entries k on the
+    node row rows[c] (site_rows[s, k] = rows[c]), ascending in c (SciPy's canonical form,
+    as the COO → CSR conversion of the same entries gives)."""
+    n, width = site_rows.shape
+    d = site_blocks.shape[2]
+    top = site_rows.max() if site_rows.size else -1
+    place = np.full(top + 1, -1, np.int64)  # a row's place in rows
+    for s in range(n):
+        for k in range(width):
+            if site_rows[s, k] >= 0:
+                place[site_rows[s, k]] = 0
+    rows = np.flatnonzero(place == 0)
+    place[rows] = np.arange(rows.size)
+    order = np.empty(width, np.int64)
+    distinct = np.empty(n, np.int64)
+    column = np.empty((n, width), np.int64)
+    summed = np.zeros((n, width, d, d))
+    for s in range(n):
+        valid = 0
+        for k in range(width):  # insertion sort of the valid entries by node row
+            row = site_rows[s, k]
+            if row < 0:
+                continue
+            at = valid
+            while at > 0 and site_rows[s, order[at - 1]] > row:
+                order[at] = order[at - 1]
+                at -= 1
+            order[at] = k
+            valid += 1
+        count = 0
+        for e in range(valid):  # one entry per distinct row, its blocks summed
+            k = order[e]
+            c = place[site_rows[s, k]] * d
+            if count == 0 or column[s, count - 1] != c:
+                column[s, count] = c
+                count += 1
+            for i in range(d):
+                for j in range(d):
+                    summed[s, count - 1, i, j] += site_blocks[s, k, i, j]
+        distinct[s] = count
+    indptr = np.zeros(n * d + 1, np.int64)
+    for s in range(n):
+        for i in range(d):
+            indptr[s * d + i + 1] = indptr[s * d + i] + distinct[s] * d
+    data = np.empty(indptr[-1])
+    columns = np.empty(indptr[-1], np.int64)
+    for s in range(n):
+        for i in range(d):
+            at = indptr[s * d + i]
+            for e in range(distinct[s]):
+                for j in range(d):
+                    data[at] = summed[s, e, i, j]
+                    columns[at] = column[s, e] + j
+                    at += 1
+    return rows, data, columns, indptr
 
 
 def nodal_stencils(steps: dict, contacts: ContactNodes) -> tuple[SideStencils, SideStencils]:
