@@ -90,7 +90,6 @@ class Slots:
             self.rows.append(rows)
         self.k_size = np.array([self.sites(s) for s in range(len(self.bodies))], np.int64)
         self.k_off = np.r_[0, np.cumsum(self.k_size)][:-1].astype(np.int64)
-        self._transposed: dict[int, sp.csr_matrix] = {}  # Hᵀ per slot, made on first use
         # the bodies' impulse responses (BodyStep.contact_response; None: lumped)
         self.response: list = [None] * len(body_ids)
         self.W: list[np.ndarray | None] = [None] * len(body_ids)
@@ -129,7 +128,6 @@ class Slots:
         new.a_slot, new.b_slot = renumber[new.a_slot], renumber[new.b_slot]
         new.k_size = np.array([new.sites(s) for s in range(len(new.bodies))], np.int64)
         new.k_off = np.r_[0, np.cumsum(new.k_size)][:-1].astype(np.int64)
-        new._transposed = {}
         new.response = [None] * len(new.bodies)
         new.W = [None] * len(new.bodies)
         new.semidefinite = [False] * len(new.bodies)
@@ -164,10 +162,11 @@ class Slots:
         H = self.H[slot]
         if H is None:
             return q
-        transposed = self._transposed.get(slot)
-        if transposed is None:  # (a new SciPy matrix object per call cost ~1% of a run)
-            transposed = self._transposed[slot] = H.T.tocsr()
-        return (transposed @ q.ravel()).reshape(-1, self.d)
+        # (SciPy's H.T @ q makes a matrix object per call: ~1.5% of a run)
+        out = np.zeros(H.shape[1])
+        _transpose_times(H.indptr, H.indices, H.data, np.ascontiguousarray(q, float).ravel(),
+                         out)
+        return out.reshape(-1, self.d)
 
     def compliance(self, slot: int, W: np.ndarray) -> np.ndarray:
         """The sites' compliance H W Hᵀ (per component) from the rows' W (k d × k d)."""
@@ -196,6 +195,15 @@ def _site_map(parts, first: np.ndarray, n_sites: int, d: int):
     site_blocks = stack_padded([st.blocks[c] for c, st, *_ in parts], width, 0.0)[first]
     rows, data, columns, indptr = _site_map_csr(site_rows, site_blocks)
     return rows, sp.csr_matrix((data, columns, indptr), shape=(n_sites * d, rows.size * d))
+
+
+@njit(cache=True)
+def _transpose_times(indptr: np.ndarray, indices: np.ndarray, data: np.ndarray,
+                     q: np.ndarray, out: np.ndarray) -> None:
+    """out += Hᵀ q for H in CSR arrays (each column's terms summed in row order)."""
+    for r in range(indptr.size - 1):
+        for e in range(indptr[r], indptr[r + 1]):
+            out[indices[e]] += data[e] * q[r]
 
 
 @njit(cache=True)
