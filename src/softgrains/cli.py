@@ -17,6 +17,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from importlib import metadata
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from softgrains.batch import run_case
 from softgrains.case import load_case, summarize
@@ -29,6 +30,9 @@ from softgrains.errors import (
     SimulationError,
 )
 from softgrains.threads import PARALLEL_MIN_POINTS
+
+if TYPE_CHECKING:
+    from softgrains.viz.compaction import AnimationQueue
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -269,7 +273,8 @@ def _sweep(args: argparse.Namespace) -> int:
     return max((o.code for o in outcomes), default=EXIT_OK)
 
 
-def _draw(run_dirs: list[Path], out: Path | None, animations=None) -> None:
+def _draw(run_dirs: list[Path], out: Path | None, animations: AnimationQueue | None = None
+          ) -> None:
     from softgrains.viz import draw_figures  # heavy: matplotlib
 
     written = draw_figures(run_dirs, out, animations=animations)

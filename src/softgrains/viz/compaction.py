@@ -647,9 +647,11 @@ class AnimationQueue:
         return drawn.replace(stem.with_suffix(drawn.suffix))
 
     def close(self) -> None:
-        """Remove the animations no figure claimed (a run :func:`plot_compaction` was not
-        given), after they are drawn."""
+        """Cancel the animations not yet started and remove those no figure claimed (a run
+        :func:`plot_compaction` was not given, or an interrupted command), once drawn."""
         for future in self._started.values():
+            if future.cancel():
+                continue
             try:
                 Path(future.result()).unlink(missing_ok=True)
             except Exception:  # noqa: BLE001 - a failed, unclaimed drawing leaves no file
