@@ -418,30 +418,6 @@ def test_a_warm_up_within_the_tolerance_is_made_exact_by_a_newton_step():
     assert residual_norm(problem, result.impulse) <= 1e-12
 
 
-def test_a_frictionless_start_near_its_solution_goes_to_the_newton_without_sweeps():
-    """The coupling loop's later solves start near their solution (dense frictionless
-    compaction: 3e-4..1e-2); the sweeps then cost more than the Newton iterations they
-    save (session 36), so a frictionless start within WARMUP_ABOVE has none. A far start
-    keeps them, and so does a frictional problem (its Coulomb Newton failed from such
-    starts on the 1000-grain front)."""
-    n = 20
-    W = np.eye(2 * n)
-    for c in range(n - 1):
-        W[2 * c, 2 * c + 2] = W[2 * c + 2, 2 * c] = 0.45
-    normal = np.tile([1.0, 0.0], (n, 1))
-    problem = one_body_problem(W, -normal, normal)
-    exact = solve(problem, None, ContactSolverOptions(tolerance=1e-12)).impulse
-    near = exact * (1.0 + 2e-3 * np.random.default_rng(5).standard_normal(exact.shape))
-    assert 1e-4 < residual_norm(problem, near) < solvers.WARMUP_ABOVE
-    options = ContactSolverOptions(tolerance=1e-10)
-    result = solve(problem, near, options)
-    assert result.converged and result.warmup == 0
-    assert residual_norm(problem, result.impulse) <= 1e-10
-    assert solve(problem, None, options).warmup > 0  # from rest: far
-    problem.mu = np.full_like(problem.mu, 0.5)
-    assert solve(problem, near, options).warmup > 0
-
-
 @pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_fallback_sweeps_stop_when_they_stop_making_progress(mu):
     """The last fallback's NSGS_FALLBACK_SWEEPS = 500 sweeps stop after FALLBACK_PATIENCE

@@ -93,14 +93,6 @@ FALLBACK_NEWTON_BUDGET = 200
 # and the Tresca fixed point 40-100 more; 20 sweeps (~30 ms on 2600 contacts) bring it to
 # ~1e-2, from where the Newton meets the solve's tolerance in 2-15 iterations
 WARMUP_SWEEPS = 20
-# ... and, for a frictionless problem (an LCP, where the Newton needs no help near its
-# solution), only from a start farther than WARMUP_ABOVE. Session 36: in a dense
-# frictionless 30-grain step the coupling loop's later solves start at 3e-4..1e-2; the
-# sweeps took 27 of a solve's 44 ms and the Newton then 1-2 iterations, without them the
-# solve takes 17-35 ms (the README job's frictionless case 104 -> 101 s). With friction
-# the Coulomb Newton from such starts failed (the 1000-grain front: 266 iterations at
-# 1.6e-4 where 20 sweeps then 3 Newton iterations reach 1e-14): the sweeps stay there.
-WARMUP_ABOVE = 1e-2
 SWEEP_CHUNK = 10  # Gauss–Seidel sweeps between two evaluations of the residual
 # the last fallback's sweeps (with friction) stop early after FALLBACK_PATIENCE evaluations
 # none of which made progress (a residual below FALLBACK_PROGRESS × the last one that did),
@@ -243,14 +235,11 @@ class _Patience:
 def _warmup(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions
             ) -> ContactResult | None:
     """``options.warmup`` Gauss–Seidel sweeps from P: their result where it is better than
-    P (a lower residual), else None (e.g. diverging sweeps on an indefinite W); None
-    without sweeps for a frictionless problem where P is within WARMUP_ABOVE already."""
+    P (a lower residual), else None (e.g. diverging sweeps on an indefinite W)."""
     if options.warmup <= 0:
         return None
-    start = residual_norm(problem, P, floor=options.floor)
-    if start <= WARMUP_ABOVE and not np.any(problem.mu > 0.0):
-        return None
     sweeps = _sweeps(problem, P, options, options.warmup)
+    start = residual_norm(problem, P, floor=options.floor)
     return sweeps if sweeps.residual < start else None
 
 
