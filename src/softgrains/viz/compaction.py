@@ -619,6 +619,7 @@ class AnimationQueue:
         self.pool, self.out_dir, self.field = pool, Path(out_dir), field
         self.mp4 = FFMpegWriter.isAvailable()
         self._started: dict[Path, Future] = {}
+        self._count = 0  # drawings started: each gets its own provisional name
 
     def start(self, folder: str | Path) -> bool:
         """Start the animation of the finished run in ``folder`` unless it is started or
@@ -634,7 +635,8 @@ class AnimationQueue:
         if not run.snapshots:
             return False
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        provisional = self.out_dir / f".animation-{len(self._started)}.partial"
+        provisional = self.out_dir / f".animation-{self._count}.partial"
+        self._count += 1
         self._started[folder] = self.pool.submit(_animation_job, str(folder),
                                                  str(provisional), self.field, self.mp4)
         return True
