@@ -625,27 +625,32 @@ class AnimationQueue:
         """Start the animation of the finished run in ``folder`` unless it is started or
         unusable (no compaction rows, no snapshots: then :func:`plot_compaction` decides,
         and reports what is wrong). Returns whether it is under way."""
-        folder = Path(folder).resolve()
-        if folder in self._started:
+        if Path(folder).resolve() in self._started:
             return True
         try:
             run = _load_run(folder)
         except CaseError:
             return False
-        if not run.snapshots:
-            return False
+        if run.snapshots:
+            self.add(run)
+        return bool(run.snapshots)
+
+    def add(self, run: _Run) -> None:
+        """Start the animation of ``run`` (loaded, with snapshots) unless it is started."""
+        key = run.folder.resolve()
+        if key in self._started:
+            return
         self.out_dir.mkdir(parents=True, exist_ok=True)
         provisional = self.out_dir / f".animation-{self._count}.partial"
         self._count += 1
-        self._started[folder] = self.pool.submit(_animation_job, str(folder),
-                                                 str(provisional), self.field, self.mp4)
-        return True
+        self._started[key] = self.pool.submit(_animation_job, str(run.folder),
+                                              str(provisional), self.field, self.mp4)
 
-    def finish(self, folder: str | Path, stem: Path) -> Path:
-        """Wait for the animation of ``folder`` (started now if it was not) and move it to
+    def finish(self, run: _Run, stem: Path) -> Path:
+        """Wait for the animation of ``run`` (started now if it was not) and move it to
         ``stem`` with its format's suffix; returns the file."""
-        self.start(folder)
-        drawn = Path(self._started.pop(Path(folder).resolve()).result())
+        self.add(run)
+        drawn = Path(self._started.pop(run.folder.resolve()).result())
         return drawn.replace(stem.with_suffix(drawn.suffix))
 
     def close(self) -> None:
@@ -709,11 +714,11 @@ def plot_compaction(run_dirs: Sequence[str | Path], out_dir: str | Path,
     ]
     jobs = [(run, out_dir / (f"animation_{slug}" if several else "animation"))
             for run, slug in with_snapshots]
-    if animations is not None:
+    if animations is not None:  # (the runs loaded here: not read again to start them)
         for run, _ in jobs:
-            animations.start(run.folder)
+            animations.add(run)
         _snapshot_figures(runs, with_snapshots, out_dir, field, written)
-        return written + [animations.finish(run.folder, stem) for run, stem in jobs]
+        return written + [animations.finish(run, stem) for run, stem in jobs]
     pool, started = _start_animations(jobs, field)
     try:
         _snapshot_figures(runs, with_snapshots, out_dir, field, written)
