@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import csv
 import time
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -133,11 +134,12 @@ def print_table(rows: list[dict], digits: int = 4) -> None:
                                 for v in r.values()) + " |")
 
 
-def _value(text: str) -> float | str:
-    """A --set value: a number where it reads as one, else the text (e.g. bspline2)."""
+def _value(text: str) -> object:
+    """A --set value as TOML reads it (1 an integer, 1.0 a float, true a boolean), else the
+    text (e.g. bspline2), as ``softgrains run --set`` reads it."""
     try:
-        return float(text)
-    except ValueError:
+        return tomllib.loads(f"value = {text}")["value"]
+    except tomllib.TOMLDecodeError:
         return text
 
 

@@ -607,3 +607,52 @@ def test_a_solve_that_fails_on_the_working_set_is_redone_on_every_contact(monkey
     assert contact.converged and contact.working_set == contact.n_contacts
     assert sim.unconverged_contact_steps == 0 and sim.retried_steps == 0
     assert np.abs(sim.state.x - full.state.x).max() < 1e-5 * 0.1
+
+
+def test_fallbacks_that_gained_nothing_are_skipped_until_the_iteration_changes(monkeypatch):
+    """Session 37 (coupling.FUTILE_FALLBACK_GAIN): a failed solve whose fallbacks lowered
+    the stalled Newton's residual by less than 10% makes the loop's next solves skip them
+    until the iteration changes (seed 3's frictional step 270 spent 8 solves of ~0.35 s
+    each on fallbacks that never moved the residual; the step converged only at Δt/2).
+    Here the landing block's first solve in contact is made to report such a failure (and
+    return half its impulses, so that the loop goes on): the next solves of that step are
+    asked without fallbacks, every other solve with them, and
+    the block lands as without the fault (positions within 1e-5 h). (Without the end-gap
+    check, whose re-solves change the iteration and so restore the fallbacks.)"""
+    from dataclasses import replace
+
+    import softgrains.contact.coupling as coupling
+
+    monkeypatch.setattr(coupling, "WORKING_SET_GAP", np.inf)
+    real_solve = coupling.solve
+    seen = {"step": 0, "faulted": None, "asked": []}  # asked: (step, fallbacks) per solve
+
+    def futile_once(problem, P0=None, options=None):
+        seen["asked"].append((seen["step"], options.fallbacks))
+        result = real_solve(problem, P0, options)
+        if seen["faulted"] is None and np.any(P0):
+            seen["faulted"] = len(seen["asked"])  # the solves up to this one
+            return replace(result, impulse=0.5 * result.impulse, residual=1.0,
+                           converged=False, fallback_gain=1.0)
+        return result
+
+    def landed(solve):
+        monkeypatch.setattr(coupling, "solve", solve)
+        sim = _block_on_slab(steps=25, contact={"end_gap_check": False})
+        for step in range(sim.n_steps):
+            seen["step"] = step
+            sim.step()
+        return sim
+
+    full = landed(real_solve)
+    seen["asked"] = []
+    sim = landed(futile_once)
+    at = seen["faulted"]
+    assert at is not None
+    k = seen["asked"][at - 1][0]  # the faulted solve's step
+    later = [fallbacks for step, fallbacks in seen["asked"][at:] if step == k]
+    assert later and not any(later)
+    assert all(fallbacks for step, fallbacks in seen["asked"][:at])
+    assert all(fallbacks for step, fallbacks in seen["asked"][at:] if step != k)
+    assert sim.unconverged_contact_steps == 0
+    assert np.abs(sim.state.x - full.state.x).max() < 1e-5 * 0.1
