@@ -20,14 +20,15 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   while the merit still falls: it stops only when ½‖Φ‖² has not fallen by 1% in
   STAGNATION_ITERATIONS). With friction it can stall or cycle (no global convergence for
   the non-associated Coulomb law): where ``options.tresca`` allows it (a symmetric PSD W)
-  it gets FRICTIONAL_NEWTON_ITERATIONS, then the **Tresca fixed point** from the initial
-  guess: the friction bound s = μ P_n
-  held, the Tresca problem (monotone for a symmetric PSD W) solved by the same Newton, s
+  it gets FRICTIONAL_NEWTON_ITERATIONS, then the **Tresca fixed point** from its best
+  iterate (or from its start, where that was better): the friction bound s = μ P_n held,
+  the Tresca problem (monotone for a symmetric PSD W) solved by the same Newton, s
   updated with Anderson mixing; then the **proximal point** loop (W + εI, well posed where
   redundant sites make W singular), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps
   from the best iterate (without friction, or on an indefinite W, the sweeps come before
-  the proximal point, as they all did before session 26). Every Newton starts
-  from WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess.
+  the proximal point, as they all did before session 26). Every Newton starts from
+  WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess. The result's
+  ``fallback_gain`` says what the fallbacks gained over the stalled Newton.
   Dimension-generic (the 3D cone's projection is exact).
 - ``nsgs``: nonlinear Gauss–Seidel over contacts with the exact local solution
   (gauss_seidel.py).
@@ -208,15 +209,15 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
     # a (nearly) singular W — contact sites that outnumber the velocity modes they sample,
     # e.g. the points of a flat face against a wall — stalls the Newton: the proximal point
     # method solves a sequence of regularised problems W + εI, each well posed (from the
-    # Tresca fixed point's start with friction, else from the initial guess: from a
-    # Newton's best iterate, where it may have been cycling, the regularised Newton was
-    # seen to stall too, before the warm-up sweeps existed); and Gauss–Seidel from the best iterate
-    # (cheap sweeps; seen to converge in 540 sweeps on a frictional compaction step whose
-    # Newton stalled at 3e-2). After a Tresca fixed point the proximal point comes first
-    # (session 26: in a dense frictional step near 300 σ0, 1620 contacts, four solves ran
-    # 500 sweeps each, 0.5–1.1 s, for 4.5–5.3e-4, and the proximal point after them met the
-    # loop's tolerance anyway); without friction, where no case was measured against it,
-    # the order stays as it was
+    # Tresca fixed point's start with friction, else from the initial guess: before the
+    # warm-up sweeps existed, from a Newton's best iterate, where it may have been
+    # cycling, the regularised Newton was seen to stall too); and Gauss–Seidel from the
+    # best iterate (cheap sweeps; seen to converge in 540 sweeps on a frictional
+    # compaction step whose Newton stalled at 3e-2). After a Tresca fixed point the
+    # proximal point comes first (session 26: in a dense frictional step near 300 σ0,
+    # 1620 contacts, four solves ran 500 sweeps each, 0.5–1.1 s, for 4.5–5.3e-4, and the
+    # proximal point after them met the loop's tolerance anyway); without friction, where
+    # no case was measured against it, the order stays as it was
     def proximal(best: ContactResult) -> ContactResult:
         if budget <= 0:
             return best
