@@ -138,9 +138,10 @@ def _value(text: str) -> object:
     """A --set value as TOML reads it (1 an integer, 1.0 a float, true a boolean), else the
     text (e.g. bspline2), as ``softgrains run --set`` reads it."""
     try:
-        return tomllib.loads(f"value = {text}")["value"]
-    except tomllib.TOMLDecodeError:
+        parsed = tomllib.loads(f"value = {text}")
+    except (tomllib.TOMLDecodeError, RecursionError):
         return text
+    return parsed["value"] if len(parsed) == 1 else text
 
 
 def main() -> None:

@@ -614,11 +614,11 @@ def test_fallbacks_that_gained_nothing_are_skipped_until_the_iteration_changes(m
     the stalled Newton's residual by less than 10% makes the loop's next solves skip them
     until the iteration changes (seed 3's frictional step 270 spent 8 solves of ~0.35 s
     each on fallbacks that never moved the residual; the step converged only at Δt/2).
-    Here the landing block's first solve in contact is made to report such a failure (and
-    return half its impulses, so that the loop goes on): the next solves of that step are
-    asked without fallbacks, every other solve with them, and the block lands as without
-    the fault (positions within 1e-5 h). (Without the end-gap check, whose re-solves
-    change the iteration and so restore the fallbacks.)"""
+    Here the landing block's first solve warm-started with impulses is made to report such
+    a failure (and return half its impulses, so that the loop goes on): the next solves of
+    that step are asked without fallbacks, every other solve with them, and the block
+    lands as without the fault (positions within 1e-5 h). (Without the end-gap check,
+    whose re-solves change the iteration and so restore the fallbacks.)"""
     from dataclasses import replace
 
     import softgrains.contact.coupling as coupling

@@ -120,7 +120,9 @@ FAILED_SOLVES_IN_A_ROW = 3
 # whose fallbacks never moved the Newton's 1.1-1.8e-4 (the loop asked 1e-5); the step
 # then converged at Δt/2. Over two whole frictional runs 14 of 341 solves with fallbacks
 # gained less than 10%, and of the 13 solves after such a one in the same step, 2 met
-# their tolerance only through the fallbacks
+# their tolerance only through the fallbacks. (Without fallbacks the solver's Coulomb
+# Newton is not cut at FRICTIONAL_NEWTON_ITERATIONS: it runs to its own stagnation test,
+# 31-37 iterations at step 270, 0.14 s a solve.)
 FUTILE_FALLBACK_GAIN = 0.9
 # the contact problem of a step is posed on a working set (session 29): the contacts that
 # carried an impulse at the previous step and those whose gap the bodies' first Newton
