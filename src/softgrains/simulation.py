@@ -83,7 +83,8 @@ class Simulation:
         if threads:
             numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
         self.model, self.state = build(case)
-        self.solver = Solver(self.model)
+        self.solver = Solver(self.model, motion_limit=case.simulation.max_step_motion
+                             * self.model.lattice.h)
         self.dt = self.last_dt = case.simulation.dt
         self.n_steps = case.simulation.n_steps
         self._rows: list[dict[str, object]] = []

@@ -53,7 +53,9 @@ class StepDiagnostics:
 class Solver:
     """Implicit MPM solver over all bodies of a Model."""
 
-    def __init__(self, model: Model) -> None:
+    def __init__(self, model: Model, motion_limit: float = 0.0) -> None:
+        """``motion_limit``: the farthest a point may move in a step (length; 0: unbounded),
+        within which the coupling loop keeps the bodies' iterates."""
         self.model = model
         # Our BLAS calls are small vector operations; a multi-threaded BLAS spinning beside the
         # Numba threads slowed a 20k-point step five-fold (docs/dev-notes.md).
@@ -69,7 +71,7 @@ class Solver:
             on_failure=c.on_failure, normal=c.normal, overlap_removal=c.overlap_removal,
             overlap_tolerance=c.overlap_tolerance, keep_closed=c.keep_closed, solver=c.solver,
             solver_iterations=c.solver_iterations, grain_sites=c.grain_sites,
-            wall_sites=c.wall_sites, end_gap_check=c.end_gap_check)
+            wall_sites=c.wall_sites, end_gap_check=c.end_gap_check, motion_limit=motion_limit)
 
     def body_points(self, state: State, index: int) -> BodyPoints:
         m, sl = self.model, self.model.bodies[index].points

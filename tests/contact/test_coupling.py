@@ -160,7 +160,7 @@ class _Body:
         return switched
 
     def mirror_negative_modes(self):
-        return False  # as for a body above DENSE_LIMIT unknowns
+        return False  # as for a body above MIRROR_LIMIT unknowns
 
 
 def test_a_body_with_an_indefinite_compliance_switches_to_the_projected_tangent():
@@ -656,3 +656,57 @@ def test_fallbacks_that_gained_nothing_are_skipped_until_the_iteration_changes(m
     assert all(fallbacks for step, fallbacks in seen["asked"][at:] if step != k)
     assert sim.unconverged_contact_steps == 0
     assert np.abs(sim.state.x - full.state.x).max() < 1e-5 * 0.1
+
+
+def test_the_largest_step_within_the_motion_limit():
+    """α = max{α ∈ [0, 1] : |a_p + α b_p| ≤ L for every p}: the root of a quadratic per row,
+    the least over the rows that would leave; 1 where none does."""
+    from softgrains.contact.coupling import largest_step_within
+
+    L = 2.0
+    assert largest_step_within(np.zeros((1, 2)), np.array([[4.0, 0.0]]), L) == 0.5
+    # a row moving back inwards does not bind; a sideways one: 1.2² + (α 2)² = 2²
+    a = np.array([[1.0, 0.0], [1.2, 0.0]])
+    b = np.array([[-2.0, 0.0], [0.0, 2.0]])
+    assert largest_step_within(a, b, L) == pytest.approx(0.8)
+    assert largest_step_within(a[:1], b[:1], L) == 1.0
+    assert largest_step_within(np.array([[2.0, 0.0]]), np.array([[1.0, 0.0]]), L) == 0.0
+
+
+def test_the_points_displacements_are_the_nodal_ones_interpolated():
+    """BodyStep.point_displacements: a uniform nodal displacement moves every point by it
+    (Σ_I N_I = 1 at every point); a linear field moves each by its value there."""
+    step = _disk_step()
+    c = np.array([0.03, -0.02])
+    np.testing.assert_allclose(step.point_displacements(np.tile(c, (step.u.shape[0], 1))),
+                               np.tile(c, (step.pts.x.shape[0], 1)), atol=1e-14)
+
+
+def test_a_body_s_iterate_is_kept_within_the_step_s_motion_limit():
+    """coupling.motion_bounded_step: a step that would carry a point past the limit is
+    shortened to reach it; from the limit, a step leading out stops the step with the
+    motion error (kind "motion", its destination's ratio to the limit, which the
+    step-size controller turns into halvings of Δt); an iterate beyond the limit or no
+    limit leaves the step as it is."""
+    from softgrains.contact.coupling import motion_bounded_step
+    from softgrains.errors import SimulationError
+
+    step = _disk_step()
+    h = 0.1
+    shift = np.tile([1.0, 0.0], (step.u.shape[0], 1))
+    step.u = 0.0 * shift
+    bounded = motion_bounded_step(step, 3.0 * h * shift, h, 0)
+    np.testing.assert_allclose(bounded, h * shift, rtol=1e-12)
+    np.testing.assert_array_equal(motion_bounded_step(step, 0.5 * h * shift, h, 0),
+                                  0.5 * h * shift)
+    np.testing.assert_array_equal(motion_bounded_step(step, 3.0 * h * shift, 0.0, 0),
+                                  3.0 * h * shift)
+    step.u = bounded  # on the limit (to round-off either way)
+    with pytest.raises(SimulationError) as failure:
+        motion_bounded_step(step, 1.5 * h * shift, h, 7)
+    assert failure.value.diagnosis["kind"] == "motion"
+    assert failure.value.diagnosis["motion"] == pytest.approx(2.5)
+    back = motion_bounded_step(step, -0.5 * h * shift, h, 7)
+    np.testing.assert_array_equal(back, -0.5 * h * shift)
+    step.u = 2.0 * h * shift
+    np.testing.assert_array_equal(motion_bounded_step(step, h * shift, h, 7), h * shift)

@@ -92,6 +92,9 @@ INDEFINITE = 1e-9  # a body's W with an eigenvalue below −this × its largest 
 # a solve on an indefinite W that a tangent switch can mend: Newton only, this many
 # iterations (those that converged in a dense compaction took 9-11)
 INDEFINITE_NEWTON_ITERATIONS = 20
+# a body's iterate on the step's motion limit whose Newton step can take less than this
+# fraction of itself stops the step (motion_bounded_step)
+BOUNDED_STEP_STUCK = 1e-3
 # the loop gives up on a step (unconverged: the step-size controller retries it shorter)
 # when its progress measure has not fallen below STALL_DECREASE × its best in
 # STALL_ITERATIONS iterations and is not falling in each of its last STALL_DESCENT
@@ -168,6 +171,9 @@ class CouplingSettings:
     solver_iterations: int = 50  # per contact solve: Newton iterations or NSGS sweeps
     grain_sites: str = "surface"  # grain–grain contacts at outer points, or at shared nodes
     wall_sites: str = "points"  # grain–wall contacts at shared nodes, patches or points
+    # the farthest a point may move in the step (length; 0: unbounded): each body's
+    # iterate is kept within it (motion_bounded_step)
+    motion_limit: float = 0.0
 
 
 @dataclass
@@ -508,7 +514,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             moved = at_sites if delassus and slots.H[slot] is not None else q
             du[body] = du.get(body, 0.0) + s.impulse_move(rows, moved, slots.response[slot])
         for i, step_u in du.items():
-            steps[i].take_step(step_u)
+            steps[i].take_step(motion_bounded_step(steps[i], step_u, settings.motion_limit,
+                                                   step))
         P[ws] = result.impulse
         status[ws] = result.status
         diag.iterations = k
@@ -647,6 +654,50 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     return ContactState(contacts, P, status, estimated), diag
 
 
+def largest_step_within(a: np.ndarray, b: np.ndarray, limit: float) -> float:
+    """The largest α in [0, 1] with |a_p + α b_p| ≤ limit at every row p (a_p within the
+    limit): the positive root of |b|² α² + 2 a·b α + |a|² − limit² = 0, the least over
+    the rows that leave the limit within the step."""
+    aa, ab, bb = (a * a).sum(axis=1), (a * b).sum(axis=1), (b * b).sum(axis=1)
+    leaving = (aa + 2.0 * ab + bb > limit * limit) & (bb > 0.0)
+    if not leaving.any():
+        return 1.0
+    aa, ab, bb = aa[leaving], ab[leaving], bb[leaving]
+    root = (-ab + np.sqrt(np.maximum(ab * ab - bb * (aa - limit * limit), 0.0))) / bb
+    return float(np.clip(root.min(), 0.0, 1.0))
+
+
+def motion_bounded_step(step, du: np.ndarray, limit: float, at: int) -> np.ndarray:
+    """The body's combined step du, shortened where it would carry a point farther than
+    ``limit`` from where the step started (a trust region: the step's contacts are found
+    at its start, and a step that moves a point farther is undone and retried shorter
+    anyway, Simulation._check_motion). Without it the quasi-static squeeze's disk, whose
+    rigid rotation is an unstable mode of the discrete problem (dev-notes, #11 item 0a),
+    was carried to a solution turned by 1.3 rad in one step at Δt/8 and Δt/16, and the
+    step failed at every halving (session 38). An iterate already beyond the limit is
+    left to the motion check. One on the limit whose step leads out (α below
+    BOUNDED_STEP_STUCK) cannot go on: a SimulationError of kind "motion" with the
+    step's destination over the limit (the controller halves Δt as often as that needs)."""
+    # a point's displacement is a convex combination of its nodes' (N_I ≥ 0, Σ N_I = 1):
+    # within the limit wherever every node's is
+    if limit <= 0.0 or ((step.u + du) ** 2).sum(axis=1).max(initial=0.0) <= limit * limit:
+        return du
+    a = step.point_displacements(step.u)
+    # (an iterate this method put on the limit may read a round-off beyond it)
+    if (a * a).sum(axis=1).max(initial=0.0) > (1.0 + 1e-9) * limit * limit:
+        return du
+    b = step.point_displacements(du)
+    alpha = largest_step_within(a, b, limit)
+    if alpha < BOUNDED_STEP_STUCK:
+        reach = float(np.sqrt(((a + b) ** 2).sum(axis=1)).max())
+        raise SimulationError(
+            f"step {at}: body '{step.stepper.name}' would move a point "
+            f"{reach / limit:.3g} × [simulation] max_step_motion in the step (its iterate "
+            "is held at the limit and its Newton step leads out): retrying with a smaller "
+            "dt.", kind="motion", step=at, body=step.stepper.name, motion=reach / limit)
+    return du if alpha == 1.0 else alpha * du
+
+
 def _working_slots(everywhere: Slots, normal: np.ndarray, member: np.ndarray,
                    mu: np.ndarray) -> tuple[Slots, np.ndarray]:
     """The slots (sites, maps, compliances to come) of the contacts in ``member``, and
@@ -685,7 +736,7 @@ def _switch_indefinite(steps: dict, slots: Slots) -> list[int]:
     indefinite (an exact tangent under compression) take the mirrored negative modes
     (session 28: the frictionless dense band −21%, half the coupling iterations, against
     the projected tangent), or the projected tangent where the mirror does not apply
-    (a body above DENSE_LIMIT unknowns); their W_s is dropped. Returns them."""
+    (a body above MIRROR_LIMIT unknowns); their W_s is dropped. Returns them."""
     switched = []
     for slot, body in enumerate(slots.bodies):
         if slots.semidefinite[slot]:

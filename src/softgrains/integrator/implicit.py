@@ -53,7 +53,7 @@ from softgrains.integrator.assembly import (
     point_stresses,
 )
 from softgrains.integrator.linear_solvers import (
-    DENSE_LIMIT,
+    MIRROR_LIMIT,
     DenseCholesky,
     LinearSolver,
     dense,
@@ -374,9 +374,9 @@ class BodyStep:
         on every other mode, so the bulk keeps Newton's convergence where the projected
         tangent (every compressed point's tangent changed) converges slowly. Only the
         Newton matrix changes, not the residual: the step's solution is the same. False
-        where it does not apply: projected or exact tangent, a body above DENSE_LIMIT
+        where it does not apply: projected or exact tangent, a body above MIRROR_LIMIT
         unknowns (no dense eigensolve), or A without a negative mode."""
-        if not self.can_project() or self._mirrored or self.u.size > DENSE_LIMIT:
+        if not self.can_project() or self._mirrored or self.u.size > MIRROR_LIMIT:
             return False
         current = self._A is None or self._A_at is self.u
         A = self._A if self._A is not None else self.newton_matrix()
@@ -561,6 +561,13 @@ class BodyStep:
         """Position of active ``row``'s node and the body's point nearest to it."""
         node = self.stepper.lattice.node_positions(self.box)[self.active[row]]
         return node, int(np.argmin(np.sum((self.pts.x - node) ** 2, axis=1)))
+
+    def point_displacements(self, u: np.ndarray) -> np.ndarray:
+        """The points' displacements u_p = Σ_I N_I(x_p) u_I for nodal values u (the active
+        rows), as the step moves them (x_p^{n+1} = x_p^n + u_p)."""
+        self.u_box[:] = 0.0
+        self.u_box[self.active] = u
+        return np.einsum("pk,pkd->pd", self.N, self.u_box[self.nodes])
 
     def worst_point(self, u: np.ndarray) -> tuple[int, float]:
         """(index in the body, J) of the point with the smallest or a non-finite J at the
