@@ -28,11 +28,12 @@ CG_RELATIVE_TOLERANCE = 1e-10
 # compliance at nearly all its rows ([A⁻¹]_cc, 235 of 262 columns for a D/h 10 grain of the
 # dense compaction), which LAPACK's blocked solves give in half SuperLU's time (session 26:
 # 0.126 s against 0.253 s for a step's 54 factorizations); at D/h 20 (grains of 600-1070
-# unknowns, ~270 compliance columns) in a third (session 38: 0.62 s against 1.79 s for the
-# 30 grains' factorizations and compliances; 1.7-2× at 5% of the columns; 22 against 69 ms
-# at 1066 unknowns, benchmarks/compliance_paths.py; a free disk with n/4 columns: 1.37×
-# at 1242 unknowns, 1.13× at 3156): the dense work (n³/3 + n² per column) nears the
-# sparse LU's at a few thousand unknowns, and a dense factor holds n² floats (18 MB at 1500)
+# unknowns, ~270 compliance columns) in under a third (session 38: 0.46 s against 1.64 s
+# for the 30 grains' factorizations and compliances; 2.0-3.4× at 5% of the columns; 23
+# against 71 ms at 1066 unknowns, benchmarks/compliance_paths.py; a free disk with n/4
+# columns: 1.37× at 1242 unknowns, 1.13× at 3156): the dense work (n³/3 + n² per column)
+# nears the sparse LU's at a few thousand unknowns, and a dense factor holds n² floats
+# (18 MB at 1500)
 DENSE_LIMIT = 1500
 # a body with at most this many unknowns may have its Newton matrix's negative modes
 # mirrored (a dense eigensolve, mirrored_negative_modes); larger ones take the projected
