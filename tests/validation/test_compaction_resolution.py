@@ -1,0 +1,72 @@
+"""VALIDATION.md C9's "φ(σ) moves by less than 1% when h is halved", on a sample whose path
+does not branch: two equal disks side by side in a box two diameters wide, compacted by the
+example's protocol (pre-compaction under σ0, top wall at 5 m/s to 300 σ0) at D/h 10 and 20.
+
+The 30-grain example's curve is chaotic (its grains rearrange; round-off alone moved φ by
+1.8% at 100 σ0), so the effect of h on it is told from seed ensembles (docs/dev-notes.md,
+benchmarks/compaction_resolution_ensemble.py). Here every step of the path is the same at
+both resolutions, and φ(σ) checks what h changes: the grains' bulk response at large strain,
+their contacts with each other and with the walls, and the wall stress. An offset of the
+contact surfaces that scales with h fails it: with the gap taken at the points instead of
+their cells' edges (half a point spacing), φ0 and φ at 2–300 σ0 moved by −2.9…−4.7%
+(checked 2026-12-06, frictionless; the D/h 10 pre-compaction then did not settle either).
+Measured (2026-12-06): D/h 20 within 0.17% (frictionless) and 0.67% (μ = 0.5) of D/h 10
+at 2–300 σ0, D/h 40 within 0.07% and 0.22% of D/h 20 (docs/dev-notes.md, session 39).
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from softgrains import Simulation, load_case
+from softgrains.io import read_table
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+LEVELS = (2.0, 10.0, 30.0, 100.0, 200.0, 300.0)  # σ_yy/σ0 where φ is compared
+
+
+def pair_of_disks(cell_size: float, dt: float, friction: float) -> dict[str, object]:
+    """The frictionless compaction example with two disks of 8.9 mm in a box 18.6 mm wide
+    (the seed drops the second onto the first; the pre-compaction seats it beside it)."""
+    return {"grid.cell_size": cell_size, "simulation.dt": dt, "simulation.seed": 4,
+            "simulation.threads": 1, "sample.count": 2, "sample.mean_diameter": 0.0089,
+            "sample.polydispersity": 0.0, "sample.box_width": 0.0186,
+            "contact.friction": friction, "output.snapshot_interval": 0,
+            "output.progress": False}
+
+
+def phi_at_levels(out) -> tuple[float, np.ndarray]:
+    """φ0 and φ where σ_yy/σ0 first reaches each of LEVELS in the compaction (linear
+    interpolation between the two rows about the crossing)."""
+    series = read_table(out / "series.csv")
+    protocol = json.loads((out / "summary.json").read_text())["protocol"]
+    compaction = series["phase"] == "compaction"
+    ratio = series["stress_yy"][compaction] / protocol["sigma0"]
+    phi = series["phi"][compaction]
+    found = []
+    for level in LEVELS:
+        k = int(np.flatnonzero(ratio >= level)[0])
+        w = (level - ratio[k - 1]) / (ratio[k] - ratio[k - 1])
+        found.append(phi[k - 1] + w * (phi[k] - phi[k - 1]))
+    return protocol["phi0"], np.array(found)
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.5])
+def test_a_pair_of_disks_compacts_the_same_when_h_is_halved(tmp_path, friction):
+    results = []
+    for cell_size, dt in ((1e-3, 2e-5), (5e-4, 1e-5)):  # D/h 10 and 20, the same Δt c/h
+        out = tmp_path / f"h{cell_size:g}"
+        case = load_case(EXAMPLES / "compaction_frictionless.toml",
+                         pair_of_disks(cell_size, dt, friction))
+        summary = Simulation(case, out=out).run()
+        assert summary["status"] == "completed"
+        assert summary["protocol"]["precompaction_equilibrium"] is True
+        # the second disk seated beside the first (measured h0 = 8.880 mm for D = 8.9 mm)
+        assert summary["protocol"]["h0"] < 1.05 * 0.0089
+        assert "σ_yy/σ0" in summary["protocol"]["stop_reason"]
+        results.append(phi_at_levels(out))
+    (phi0_coarse, coarse), (phi0_fine, fine) = results
+    assert abs(phi0_fine / phi0_coarse - 1.0) < 0.01
+    assert np.all(np.abs(fine / coarse - 1.0) < 0.01), (coarse, fine)
