@@ -207,6 +207,40 @@ def test_an_overlap_beyond_the_gap_limit_does_not_creep(tmp_path, monkeypatch):
     assert summary["largest_contact_penetration_h"] < 0.03 + 2 * coupling.GAP_SETTLE
 
 
+def test_a_sample_prepared_without_friction_gets_its_friction_at_sigma0(tmp_path):
+    """[protocol] precompaction_friction = 0: the pre-compaction is the frictionless run's,
+    step for step (the same φ0 and h0), the compaction has the case's μ = 0.5 (sticking
+    contacts, and the model's μ back to 0.5); a resume in either phase keeps the phase's μ."""
+    runs = {}
+    for name, friction, prepared in (("without", 0.0, None), ("prepared", 0.5, 0.0)):
+        sim = Simulation(small_compaction(friction=friction, wall_speed=0.5,
+                                          stop_stress_ratio=3.0,
+                                          precompaction_friction=prepared),
+                         out=tmp_path / name)
+        assert not sim.model.friction.any()  # μ = 0 in the pre-compaction either way
+        summary = sim.run()
+        runs[name] = (sim, summary, read_table(tmp_path / name / "series.csv"))
+    (_, plain, series0), (sim, prepared, series) = runs["without"], runs["prepared"]
+    assert prepared["protocol"]["phi0"] == plain["protocol"]["phi0"]
+    assert prepared["protocol"]["h0"] == plain["protocol"]["h0"]
+    assert prepared["protocol"]["precompaction_friction"] == 0.0
+    pre, pre0 = series["phase"] == "precompaction", series0["phase"] == "precompaction"
+    assert pre.sum() == pre0.sum()
+    assert np.array_equal(series["stress_yy"][pre], series0["stress_yy"][pre0])
+    assert not series["contact_sticking"][pre].any()
+    assert series["contact_sticking"][~pre].max() > 0
+    grains = [b.index for b in sim.model.bodies if b.deformable]
+    assert sim.model.friction[grains[0], grains[1]] == 0.5
+    assert "friction from μ = 0 to the case's" in (tmp_path / "prepared" / "run.log").read_text()
+    # restoring a pre-compaction state (a resume, a retried step) brings its μ back
+    protocol = sim.protocol
+    state = protocol.state_dict()
+    protocol.load_state_dict({**state, "phase": "precompaction"})
+    assert not sim.model.friction.any()
+    protocol.load_state_dict(state)
+    assert sim.model.friction[grains[0], grains[1]] == 0.5
+
+
 def test_a_run_capped_by_end_time_says_so(tmp_path):
     case = small_compaction()
     case.simulation.end_time = 5e-3  # a few pre-compaction steps

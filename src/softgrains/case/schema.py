@@ -398,6 +398,10 @@ class ProtocolSettings(_Section):
         0.05, gt=0, description="largest top-wall speed of the stress control [m/s]")
     precompaction_dt: float | None = Field(
         None, gt=0, description="time step of the pre-compaction [s] (default: dt)")
+    precompaction_friction: float | None = Field(
+        None, ge=0.0, le=10.0, description="Coulomb coefficient of every body pair during the "
+        "pre-compaction (default: the [contact] ones); 0 prepares the sample without friction "
+        "and the [contact] friction acts from σ0 on")
     stress_tolerance: float = Field(
         0.01, gt=0, lt=1, description="equilibrium: |σ − σ0| ≤ tolerance σ0")
     kinetic_ratio: float = Field(

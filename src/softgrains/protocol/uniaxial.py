@@ -9,6 +9,9 @@ law controls the stress:
 The loop gain K v_max Δt G/σ0 (K = dσ/dy of the packing, ~1e8 Pa/m for 30 disks of 1 cm
 at 5 kPa) must stay below 1: a secant estimate of K made the wall oscillate (σ between 0
 and 4 σ0), measured 2026-11-23.
+With ``precompaction_friction`` every body pair has that Coulomb coefficient until the
+pre-compaction ends, and the case's own from then on (a sample prepared without friction:
+the frictional jammed state at σ0 depends on h, docs/dev-notes.md, session 39).
 Equilibrium when |σ − σ0| ≤ tol σ0 and the kinetic energy of the grains that are not
 rattlers ≤ ratio × strain energy; then h0 (wall gap) and φ0 are recorded and the
 compaction starts: v = −wall_speed (reached linearly in wall_speed_ramp seconds) until
@@ -54,6 +57,20 @@ class UniaxialCompaction:
         self._smooth = 0.0  # σ_yy averaged over the last steps (impacts make it jump)
         self._pre_steps = 0
         self._t_compaction = 0.0
+        # the case's μ per body pair, for the compaction (the model's array is set in place)
+        self._friction = None if model.friction is None else model.friction.copy()
+        self._apply_friction()
+
+    def _apply_friction(self) -> None:
+        """μ of the current phase into the model: ``precompaction_friction`` for every pair
+        during the pre-compaction where it is set, else the case's."""
+        mu = self.settings.precompaction_friction
+        if mu is None or self._friction is None:
+            return
+        if self.phase == PRECOMPACTION:
+            self.model.friction[...] = mu
+        else:
+            self.model.friction[...] = self._friction
 
     # -- control -------------------------------------------------------------------------
     def time_step(self) -> float:
@@ -108,10 +125,13 @@ class UniaxialCompaction:
                        f"{abs(self._sigma - s.sigma0) / s.sigma0:.3g}, kinetic/strain energy "
                        f"= {kinetic / max(strain, 1e-300):.3g})")
                 self.equilibrium = balanced and calm
+                self._apply_friction()
+                switched = ("" if s.precompaction_friction is None else
+                            f", friction from μ = {s.precompaction_friction:g} to the case's")
                 self.events.append(
                     f"pre-compaction done ({how}) at t = {state.time:.6g} s: σ_yy = "
                     f"{self._sigma:.4g} Pa, h0 = {self.h0:.6g} m, φ0 = {self.phi0:.4f}; "
-                    f"compaction at {s.wall_speed:g} m/s")
+                    f"compaction at {s.wall_speed:g} m/s{switched}")
         else:
             if (s.stop_stress_ratio is not None
                     and self._sigma >= s.stop_stress_ratio * s.sigma0):
@@ -156,10 +176,12 @@ class UniaxialCompaction:
                 self.events[:] = list(values[name])
             else:
                 setattr(self, name, copy.deepcopy(values[name]))
+        self._apply_friction()
 
     def summary(self) -> dict[str, object]:
         s = self.settings
         return {"kind": s.kind, "sigma0": s.sigma0, "phi0": self.phi0, "h0": self.h0,
                 "wall_speed": s.wall_speed, "label": self.label, "phase": self.phase,
                 "finished": self.finished, "stop_reason": self.stop_reason,
-                "precompaction_equilibrium": self.equilibrium}
+                "precompaction_equilibrium": self.equilibrium,
+                "precompaction_friction": s.precompaction_friction}
