@@ -13,9 +13,8 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
 from softgrains.io import read_table
+from softgrains.observe.compaction import phi_at_stress_ratios
 
 
 def phi_at_levels(run: Path, levels: list[float]) -> tuple[float, dict[float, float]]:
@@ -24,20 +23,9 @@ def phi_at_levels(run: Path, levels: list[float]) -> tuple[float, dict[float, fl
     protocol = json.loads((run / "summary.json").read_text())["protocol"]
     sigma0, phi0 = protocol["sigma0"], protocol["phi0"]
     comp = series["phase"] == "compaction"
-    ratio, phi = series["stress_yy"][comp] / sigma0, series["phi"][comp]
-    found = {}
-    for level in levels:
-        above = np.flatnonzero(ratio >= level)
-        if not len(above):
-            found[level] = float("nan")
-            continue
-        k = above[0]
-        if k == 0:
-            found[level] = float(phi[0])
-            continue
-        t = (level - ratio[k - 1]) / (ratio[k] - ratio[k - 1])
-        found[level] = float(phi[k - 1] + t * (phi[k] - phi[k - 1]))
-    return phi0, found
+    values = phi_at_stress_ratios(series["stress_yy"][comp] / sigma0, series["phi"][comp],
+                                  levels)
+    return phi0, {level: float(v) for level, v in zip(levels, values, strict=True)}
 
 
 def main() -> None:

@@ -8,7 +8,11 @@ import pytest
 
 from softgrains import Simulation, load_case
 from softgrains.io import read_table
-from softgrains.observe.compaction import COMPACTION_COLUMNS, coordination
+from softgrains.observe.compaction import (
+    COMPACTION_COLUMNS,
+    coordination,
+    phi_at_stress_ratios,
+)
 
 
 def small_compaction(friction=0.0, seeding="rings", **protocol):
@@ -239,6 +243,16 @@ def test_a_sample_prepared_without_friction_gets_its_friction_at_sigma0(tmp_path
     assert not sim.model.friction.any()
     protocol.load_state_dict(state)
     assert sim.model.friction[grains[0], grains[1]] == 0.5
+
+
+def test_phi_at_stress_ratios_reads_the_first_crossing():
+    ratio = np.array([1.5, 2.0, 6.0, 3.0, 12.0])
+    phi = np.array([0.70, 0.72, 0.80, 0.79, 0.90])
+    # 1: already there at the first row; 4: between rows 1 and 2; 10: between 3 and 4
+    # (the first crossing, not the last); 20: never
+    found = phi_at_stress_ratios(ratio, phi, [1.0, 4.0, 10.0, 20.0])
+    assert found[:3] == pytest.approx([0.70, 0.76, 0.79 + 0.11 * 7.0 / 9.0])
+    assert np.isnan(found[3])
 
 
 def test_a_run_capped_by_end_time_says_so(tmp_path):

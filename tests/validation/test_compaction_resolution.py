@@ -22,6 +22,7 @@ import pytest
 
 from softgrains import Simulation, load_case
 from softgrains.io import read_table
+from softgrains.observe.compaction import phi_at_stress_ratios
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 LEVELS = (2.0, 10.0, 30.0, 100.0, 200.0, 300.0)  # σ_yy/σ0 where φ is compared
@@ -38,19 +39,13 @@ def pair_of_disks(cell_size: float, dt: float, friction: float) -> dict[str, obj
 
 
 def phi_at_levels(out) -> tuple[float, np.ndarray]:
-    """φ0 and φ where σ_yy/σ0 first reaches each of LEVELS in the compaction (linear
-    interpolation between the two rows about the crossing)."""
+    """φ0 and φ where σ_yy/σ0 first reaches each of LEVELS in the compaction (nan where it
+    never does: the comparison below then fails)."""
     series = read_table(out / "series.csv")
     protocol = json.loads((out / "summary.json").read_text())["protocol"]
     compaction = series["phase"] == "compaction"
-    ratio = series["stress_yy"][compaction] / protocol["sigma0"]
-    phi = series["phi"][compaction]
-    found = []
-    for level in LEVELS:
-        k = int(np.flatnonzero(ratio >= level)[0])
-        w = (level - ratio[k - 1]) / (ratio[k] - ratio[k - 1])
-        found.append(phi[k - 1] + w * (phi[k] - phi[k - 1]))
-    return protocol["phi0"], np.array(found)
+    return protocol["phi0"], phi_at_stress_ratios(
+        series["stress_yy"][compaction] / protocol["sigma0"], series["phi"][compaction], LEVELS)
 
 
 @pytest.mark.parametrize("friction", [0.0, 0.5])

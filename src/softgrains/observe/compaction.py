@@ -78,6 +78,24 @@ def box_stresses(model, state, walls: dict[str, int], grains: np.ndarray, width:
     }
 
 
+def phi_at_stress_ratios(stress_ratio: np.ndarray, phi: np.ndarray, levels) -> np.ndarray:
+    """φ where the compaction's σ_yy/σ0 (``stress_ratio``, in step order) first reaches each
+    level: linear between the two rows about the crossing (the first row if it is already
+    there), nan where it never does (C9's φ(σ) compared between runs)."""
+    found = np.full(len(levels), np.nan)
+    for j, level in enumerate(levels):
+        above = np.flatnonzero(stress_ratio >= level)
+        if not above.size:
+            continue
+        k = above[0]
+        if k == 0:
+            found[j] = phi[0]
+            continue
+        t = (level - stress_ratio[k - 1]) / (stress_ratio[k] - stress_ratio[k - 1])
+        found[j] = phi[k - 1] + t * (phi[k] - phi[k - 1])
+    return found
+
+
 def coordination(contacts, is_grain: np.ndarray) -> dict[str, float]:
     """Z, Z_w, Z* and the rattler fraction from a step's ContactState."""
     return coordination_and_rattlers(contacts, is_grain)[0]
