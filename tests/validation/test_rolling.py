@@ -14,11 +14,13 @@ points form a polygon, and a contact one or two sites wide resists turning it (a
 torque that vanishes as the sites per contact grow), and the θ = 1 scheme's dissipation
 adds to it (wall, D/h 10, μ = 0.05: R dω/dt at 31% of the analytic rate, 70% with θ = 1/2,
 8% with PIC transfers; a free spinning disk keeps 98.8% of its angular momentum over the
-same 0.1 s with FLIP, 45% with PIC). Rolling at μ = 0.5: a low by 3.8 / 1.6 / 0.6% at D/h 10 / 20 / 40 on the wall,
-4.0 / 0.2% on the slab. Spinning up at μ = 0.05, where the friction torque is small: R dω/dt
-(from the points' turning angle) low by 69 / 11.5% at D/h 10 / 20 on the wall and 54 / 3.6%
-on the slab (from their angular momentum at D/h 40: 3.6% and 0.6%; the slab's own surface is
-smooth, so the pass against it sees no polygon); the sliding a within 0.15% at every h.
+same 0.1 s with FLIP, 45% with PIC).
+- Rolling at μ = 0.5: a low by 3.8 / 1.6 / 0.6% at D/h 10 / 20 / 40 on the wall, by
+  4.0 / 0.2% at D/h 10 / 20 on the slab.
+- Spinning up at μ = 0.05, where the friction torque is small: R dω/dt (from the points'
+  turning angle) low by 69 / 11.5% at D/h 10 / 20 on the wall and by 54 / 3.6% on the slab
+  (from their angular momentum at D/h 40: 3.6% and 0.6%; the slab's own surface is smooth,
+  so the pass against it sees no polygon). The sliding a within 0.15% at every h.
 """
 
 import numpy as np
