@@ -69,6 +69,7 @@ def snapshot(sim) -> tuple[dict[str, np.ndarray], dict[str, object]]:
         "transfer_dissipation": sim.transfer_dissipation,
         "largest_penetration": sim.largest_penetration,
         "dt_factor": sim.dt_factor, "steps_at_factor": sim.steps_at_factor,
+        "grow_after": sim.grow_after, "just_grown": sim.just_grown,
         "smallest_dt_factor": sim.smallest_dt_factor,
         "grain_speed": sim.grain_speed, "reach_retries": sim.reach_retries,
         "last_row": sim._rows[-1] if sim._rows else None,
@@ -140,6 +141,8 @@ def restore(sim, arrays: dict[str, np.ndarray], meta: dict[str, object]) -> None
     sim.largest_penetration = float(meta.get("largest_penetration", 0.0))
     sim.dt_factor = float(meta.get("dt_factor", 1.0))
     sim.steps_at_factor = int(meta.get("steps_at_factor", 0))
+    sim.grow_after = int(meta.get("grow_after", sim.grow_after))
+    sim.just_grown = bool(meta.get("just_grown", sim.just_grown))
     sim.smallest_dt_factor = float(meta.get("smallest_dt_factor", 1.0))
     speed = meta.get("grain_speed")  # (none before session 26: the full reach first)
     sim.grain_speed = None if speed is None else float(speed)

@@ -55,6 +55,10 @@ RETRYABLE = {"nan", "inverted", "newton", "contact", "motion"}  # a smaller Δt 
 # compaction takes 10-20 s a step, so a twentieth of its 10 000 steps is hours
 PROGRESS_LOG_SECONDS = 60.0
 GROW_AFTER_STEPS = 5  # converged steps in a row before the controller doubles Δt again
+# ... twice as many after each growth whose first step failed, up to this (a difficulty
+# that persists, e.g. the frictionless compaction near 300 σ0, where each attempt at the
+# nominal Δt failed after 7-13 s of coupling iterations, 4 times in 20 steps: session 40)
+GROW_AFTER_MAX = 80
 # contact.adaptive_reach (session 26): a step's point contacts are taken up to the gap
 # REACH_MARGIN × the relative motion its points are expected to make (at least REACH_FLOOR
 # cells): the full kernel reach (~2.1 h with B-splines) made 2700 contacts in a dense
@@ -116,6 +120,8 @@ class Simulation:
         self._full_reach = False
         self.dt_factor = 1.0  # the step-size controller's Δt / nominal Δt
         self.steps_at_factor = 0  # steps converged in a row since dt_factor last changed
+        self.grow_after = GROW_AFTER_STEPS  # ... before dt_factor doubles again
+        self.just_grown = False  # dt_factor doubled before this step
         self.smallest_dt_factor = 1.0
         self.retry_events: list[str] = []  # their messages, logged by run()
         self.checkpoint_errors = 0  # checkpoint writes that failed (logged, run goes on)
@@ -195,7 +201,9 @@ class Simulation:
         on failure. The step-size controller: a step that fails in a way a smaller Δt may
         cure is undone and retried with Δt halved, down to the nominal Δt / 2^k with
         k = ``simulation.retry_halvings``; after ``GROW_AFTER_STEPS`` steps in a row that
-        succeed, Δt is doubled again, up to the nominal Δt. Each change is noted in
+        succeed, Δt is doubled again, up to the nominal Δt (where the step right after a
+        growth fails, the next growth waits twice as many steps, up to GROW_AFTER_MAX; a
+        growth that holds brings the wait back to GROW_AFTER_STEPS). Each change is noted in
         ``retry_events`` (logged by run()) and counted in summary.json. A step that would
         move a grain's point more than ``max_step_motion`` cells is shortened as many
         halvings as that takes: before it, as far as the grains' velocities tell
@@ -226,22 +234,29 @@ class Simulation:
                     raise
                 rows, retried, redone = self._rows, self.retried_steps + 1, self.reach_retries
                 smallest = min(self.smallest_dt_factor, factor)
+                backed_off = self.just_grown and self.grow_after < GROW_AFTER_MAX
+                wait = min(2 * self.grow_after, GROW_AFTER_MAX) if backed_off else \
+                    self.grow_after
                 checkpointing.restore(self, *saved)  # the state before the failed attempt
                 self._rows, self.retried_steps, self.reach_retries = rows, retried, redone
                 self.dt_factor, self.steps_at_factor = factor, 0
+                self.grow_after, self.just_grown = wait, False
                 self.smallest_dt_factor = smallest
                 self.retry_events.append(
                     f"{str(error).splitlines()[0]}\n  retrying step {self.state.step} with "
                     f"dt x {self.dt_factor:g} (step-size controller, [simulation] "
-                    "retry_halvings)")
+                    "retry_halvings)" + (f"; it failed right after dt grew: dt grows back "
+                                         f"after {wait} converged steps" if backed_off else ""))
                 continue
+            if self.just_grown:  # the growth held
+                self.grow_after, self.just_grown = GROW_AFTER_STEPS, False
             self.steps_at_factor += 1
-            if self.dt_factor < 1.0 and self.steps_at_factor >= GROW_AFTER_STEPS:
-                self.dt_factor = min(1.0, 2.0 * self.dt_factor)
-                self.steps_at_factor = 0
+            if self.dt_factor < 1.0 and self.steps_at_factor >= self.grow_after:
                 self.retry_events.append(
-                    f"step {self.state.step}: {GROW_AFTER_STEPS} steps converged, dt x "
-                    f"{self.dt_factor:g} from here (step-size controller)")
+                    f"step {self.state.step}: {self.steps_at_factor} steps converged, dt x "
+                    f"{min(1.0, 2.0 * self.dt_factor):g} from here (step-size controller)")
+                self.dt_factor = min(1.0, 2.0 * self.dt_factor)
+                self.steps_at_factor, self.just_grown = 0, True
             return dg
 
     def _nominal_dt(self) -> float:
@@ -277,7 +292,7 @@ class Simulation:
         cuts = _halvings_for(speed * dt * self.dt_factor / reach)
         factor = max(self.dt_factor * 0.5 ** cuts, 0.5 ** halvings)
         if factor < self.dt_factor:
-            self.dt_factor, self.steps_at_factor = factor, 0
+            self.dt_factor, self.steps_at_factor, self.just_grown = factor, 0, False
             self.smallest_dt_factor = min(self.smallest_dt_factor, factor)
             self.retry_events.append(
                 f"step {self.state.step}: a grain moving at {speed:.3g} m/s would cross "

@@ -199,3 +199,44 @@ def test_an_unconverged_contact_problem_is_saved_and_replays(tmp_path):
     scale = np.abs(newton.impulse).max()
     assert scale > 0.0
     assert np.abs(newton.impulse - nsgs.impulse).max() <= 1e-6 * scale
+
+
+def test_the_controller_waits_longer_to_grow_dt_where_each_growth_fails(tmp_path):
+    """A difficulty that persists (here a step that only converges at Δt/2 or shorter): the
+    first growth after 5 converged steps fails, the next waits 10 steps, then 20, ...; a
+    growth that holds brings the wait back to 5. Resume keeps the wait."""
+    from softgrains import Simulation, load_case
+    from softgrains.errors import SimulationError
+
+    data = _newton()
+    data["simulation"].update(newton_max_iterations=25, steps=60)
+    del data["simulation"]["retry_halvings"]
+    sim = Simulation(load_case(data))
+    advance, limit = sim._advance, [0.5]
+
+    def only_short(factor):
+        if factor > limit[0]:
+            raise SimulationError("too long", kind="contact")
+        return advance(factor)
+
+    sim._advance = only_short
+    failed = []
+    for _ in range(45):
+        retried = sim.retried_steps
+        sim.step()
+        if sim.retried_steps > retried:
+            failed.append(sim.state.step - 1)
+    # step 0 fails at Δt and is redone at Δt/2; the growth after 5 steps fails at step 5,
+    # the next, 10 steps later, at step 15, the next, 20 steps later, at 35
+    assert failed == [0, 5, 15, 35]
+    assert sim.grow_after == 40
+    sim.write_checkpoint(tmp_path / "checkpoint.h5")
+    resumed = Simulation(load_case(data))
+    resumed.resume(tmp_path / "checkpoint.h5")
+    assert (resumed.grow_after, resumed.steps_at_factor, resumed.dt_factor) == \
+        (sim.grow_after, sim.steps_at_factor, sim.dt_factor)
+    limit[0] = 1.0  # the difficulty passes: the next growth holds and the wait is 5 again
+    while sim.dt_factor < 1.0:
+        sim.step()
+    sim.step()
+    assert sim.grow_after == 5 and not sim.just_grown
