@@ -14,8 +14,10 @@ COMPACTION = {
     "simulation": {"dt": 1e-4, "steps": 60, "theta": 1.0, "seed": 3},
     "grid": {"cell_size": 2e-3},
     "materials": {"gel": {"young": 1e7, "poisson": 0.4, "density": 100.0}},
+    # clearance: one point spacing, the default until session 40 (this deposit runs all
+    # 60 steps below stop_stress_ratio, which the resume tests need)
     "sample": {"count": 6, "mean_diameter": 0.01, "polydispersity": 0.2,
-               "box_width": 0.02, "material": "gel"},
+               "box_width": 0.02, "material": "gel", "clearance": 1e-3},
     "protocol": {"kind": "uniaxial-compaction", "sigma0": 5e3, "wall_speed": 5.0,
                  "precompaction_dt": 5e-4, "precompaction_speed": 0.5,
                  "precompaction_max_steps": 40, "stop_stress_ratio": 30.0},
