@@ -10,8 +10,10 @@ their contacts with each other and with the walls, and the wall stress. An offse
 contact surfaces that scales with h fails it: with the gap taken at the points instead of
 their cells' edges (half a point spacing), φ0 and φ at 2–300 σ0 moved by −2.9…−4.7%
 (checked 2026-12-06, frictionless; the D/h 10 pre-compaction then did not settle either).
-Measured (2026-12-06): D/h 20 within 0.17% (frictionless) and 0.67% (μ = 0.5) of D/h 10
-at 2–300 σ0, D/h 40 within 0.07% and 0.22% of D/h 20 (docs/dev-notes.md, session 39).
+Measured (2026-12-06, session 40, both resolutions from the same deposit): D/h 20 within
+0.09% (frictionless) and 0.54% (μ = 0.5) of D/h 10 at 2–300 σ0 (session 39, when the
+deposit's clearance was one point spacing, so that the second disk fell from a slightly
+different place at each h: 0.17% and 0.67%, and D/h 40 within 0.07% and 0.22% of D/h 20).
 """
 
 import json
