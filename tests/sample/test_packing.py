@@ -215,3 +215,20 @@ def test_large_samples_need_no_max_attempts():
     """The default bound on random drops grows with the count (it was 200 000: 6250 disks)."""
     sample = generate_disks(8000, D, 0.2, 80 * D, 0)
     assert len(sample.radii) == 8000
+
+
+def test_a_case_deposits_the_same_sample_at_every_cell_size():
+    """Halving h must refine the same sample (VALIDATION.md C9): the deposit's default
+    clearance is a fraction of the mean diameter, not of the grid (it was one point
+    spacing until session 40, and the frictional φ0 moved 3.7% with h for that alone)."""
+    from pathlib import Path
+
+    from softgrains import load_case
+
+    example = Path(__file__).resolve().parents[2] / "examples" / "compaction_frictional.toml"
+    centres = []
+    for cell_size in (1e-3, 5e-4, 2.5e-4):
+        case = load_case(example, {"grid.cell_size": cell_size, "simulation.seed": 2})
+        centres.append(np.array([b.center for b in case.bodies if b.shape == "disk"]))
+    assert len(centres[0]) == 30
+    assert np.array_equal(centres[0], centres[1]) and np.array_equal(centres[0], centres[2])
