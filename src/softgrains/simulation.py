@@ -430,6 +430,12 @@ class Simulation:
         changes = checkpointing.check_compatible(self, meta, path)
         checkpointing.restore(self, arrays, meta)
         self.resumed_from = self.checkpoint_step = self.state.step
+        stops = [c for c in changes if c.startswith(("protocol.stop_stress_ratio",
+                                                     "protocol.stop_packing_fraction"))]
+        if self.protocol is not None and self.protocol.finished and stops:
+            # a run that had met its stop goes on under the changed one (its next step
+            # checks it again: a stop met already ends the run after that step)
+            self.protocol.reopen(", ".join(stops))
         return meta, changes
 
     def run(self, resume: bool = False) -> dict[str, object]:

@@ -136,6 +136,29 @@ def test_resume_may_change_dt_and_extend_the_run(tmp_path):
     assert "resumed from step 4" in log and "simulation.dt: 0.001 → 0.0005" in log
 
 
+def test_a_compaction_stopped_at_its_stress_goes_on_when_resumed_with_a_higher_one(tmp_path):
+    """A finished compaction resumed with a raised stop_stress_ratio continues to the new
+    stop (it reported "completed" at once, without a step, until session 40)."""
+    import copy
+
+    first = copy.deepcopy(COMPACTION)
+    first["protocol"]["stop_stress_ratio"] = 3.0
+    out = tmp_path / "out"
+    assert main(["run", str(write_case(tmp_path / "a.toml", first)), "--out", str(out),
+                 "--no-figures"]) == 0
+    stopped = json.loads((out / "summary.json").read_text())
+    assert "σ_yy/σ0" in stopped["protocol"]["stop_reason"] and stopped["steps"] < 60
+    assert main(["run", str(write_case(tmp_path / "b.toml", COMPACTION)), "--out", str(out),
+                 "--resume", "--no-figures"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["steps"] > stopped["steps"]
+    series = read_table(out / "series.csv")
+    steps = series["step"]
+    assert np.all(np.diff(steps) > 0) and steps[-1] == summary["steps"]  # no row twice
+    assert series["phase"][-1] == "compaction"
+    assert "goes on past its stop" in (out / "run.log").read_text()
+
+
 def test_checkpoint_is_replaced_atomically(tmp_path, monkeypatch):
     """A failure while writing leaves the previous checkpoint whole and no temporary file."""
     from softgrains.io import checkpoint as module

@@ -145,6 +145,12 @@ class UniaxialCompaction:
         obs["phase"] = phase
         return obs
 
+    def reopen(self, why: str) -> None:
+        """Go on with the compaction after its stop was met (a resume whose case changed the
+        stop criteria, ``why``); the next step checks the criteria again."""
+        self.events.append(f"compaction goes on past its stop ({self.stop_reason}): {why}")
+        self.finished, self.stop_reason = False, ""
+
     def observe(self, state, forces: np.ndarray, contacts) -> dict[str, object]:
         """The observables of the current state (no side effect)."""
         return self._observe(state, forces, contacts)[0]
