@@ -59,6 +59,8 @@ GROW_AFTER_STEPS = 5  # converged steps in a row before the controller doubles �
 # that persists, e.g. the frictionless compaction near 300 σ0, where each attempt at the
 # nominal Δt failed after 7-13 s of coupling iterations, 4 times in 20 steps: session 40)
 GROW_AFTER_MAX = 80
+# the case keys of a protocol's stop: a finished run resumed with one changed goes on
+STOP_KEYS = ("protocol.stop_stress_ratio", "protocol.stop_packing_fraction")
 # contact.adaptive_reach (session 26): a step's point contacts are taken up to the gap
 # REACH_MARGIN × the relative motion its points are expected to make (at least REACH_FLOOR
 # cells): the full kernel reach (~2.1 h with B-splines) made 2700 contacts in a dense
@@ -252,10 +254,10 @@ class Simulation:
                 self.grow_after, self.just_grown = GROW_AFTER_STEPS, False
             self.steps_at_factor += 1
             if self.dt_factor < 1.0 and self.steps_at_factor >= self.grow_after:
+                self.dt_factor = min(1.0, 2.0 * self.dt_factor)
                 self.retry_events.append(
                     f"step {self.state.step}: {self.steps_at_factor} steps converged, dt x "
-                    f"{min(1.0, 2.0 * self.dt_factor):g} from here (step-size controller)")
-                self.dt_factor = min(1.0, 2.0 * self.dt_factor)
+                    f"{self.dt_factor:g} from here (step-size controller)")
                 self.steps_at_factor, self.just_grown = 0, True
             return dg
 
@@ -430,8 +432,7 @@ class Simulation:
         changes = checkpointing.check_compatible(self, meta, path)
         checkpointing.restore(self, arrays, meta)
         self.resumed_from = self.checkpoint_step = self.state.step
-        stops = [c for c in changes if c.startswith(("protocol.stop_stress_ratio",
-                                                     "protocol.stop_packing_fraction"))]
+        stops = [c for c in changes if c.split(":")[0] in STOP_KEYS]
         if self.protocol is not None and self.protocol.finished and stops:
             # a run that had met its stop goes on under the changed one (its next step
             # checks it again: a stop met already ends the run after that step)

@@ -54,6 +54,21 @@ def incline(d_over_h: int, friction: float, plane: str) -> dict:
     return case
 
 
+def _centre(m: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The mass-weighted mean of the rows of x."""
+    return (m[:, None] * x).sum(axis=0) / m.sum()
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+
+
+def _turned(m: np.ndarray, r0: np.ndarray, r: np.ndarray) -> float:
+    """The angle (counter-clockwise) of the best-fit rotation taking the points' offsets r0
+    from their centre to r."""
+    return float(np.arctan2((m * _cross(r0, r)).sum(), (m * (r0 * r).sum(axis=1)).sum()))
+
+
 def motion(d_over_h: int, friction: float, plane: str = "wall") -> tuple[float, float, float]:
     """The disk's acceleration down the slope and angular acceleration (fitted over the
     last 70% of the run: centre and turning angle of its points, both quadratic in t), and
@@ -61,26 +76,19 @@ def motion(d_over_h: int, friction: float, plane: str = "wall") -> tuple[float, 
     sim = Simulation(load_case(incline(d_over_h, friction, plane)))
     disk = sim.model.bodies[0].points
     m = sim.model.mass[disk]
-
-    def centre(x):
-        return (m[:, None] * x).sum(axis=0) / m.sum()
-
-    def cross(a, b):
-        return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-
-    r0 = sim.state.x[disk] - centre(sim.state.x[disk])
+    r0 = sim.state.x[disk] - _centre(m, sim.state.x[disk])
     t, x, angle, spin = [], [], [], 0.0
     for _ in range(sim.n_steps):
         diag = sim.step()
         assert diag.contact.converged
-        c = centre(sim.state.x[disk])
+        c = _centre(m, sim.state.x[disk])
         r = sim.state.x[disk] - c
-        w = sim.state.v[disk] - centre(sim.state.v[disk])
+        w = sim.state.v[disk] - _centre(m, sim.state.v[disk])
         t.append(sim.state.time)
         x.append(c[0])
-        # the best-fit rotation of the points about their centre, and ω = L / I
-        angle.append(np.arctan2((m * cross(r0, r)).sum(), (m * (r0 * r).sum(axis=1)).sum()))
-        spin = max(spin, abs((m * cross(r, w)).sum() / (m * (r * r).sum(axis=1)).sum()) * R)
+        angle.append(_turned(m, r0, r))
+        # ω = L / I
+        spin = max(spin, abs((m * _cross(r, w)).sum() / (m * (r * r).sum(axis=1)).sum()) * R)
     t = np.array(t)
     late = t > 0.3 * t[-1]
     a = 2.0 * np.polyfit(t[late], np.array(x)[late], 2)[0]
@@ -150,7 +158,7 @@ def roller(d_over_h: int, squeeze: float = 0.01) -> tuple[np.ndarray, float, flo
     disk = sim.model.bodies[0].points
     m = sim.model.mass[disk]
     x0 = sim.state.x[disk].copy()
-    c0 = (m[:, None] * x0).sum(axis=0) / m.sum()
+    c0 = _centre(m, x0)
     sim.state.body_velocity[1:] = [[0.0, 0.01 * h / dt], [0.0, -0.01 * h / dt]]
     for _ in range(closing):
         sim.step()
@@ -161,12 +169,8 @@ def roller(d_over_h: int, squeeze: float = 0.01) -> tuple[np.ndarray, float, flo
         assert diag.contact.converged
         force = diag.contact_forces(3, 2, sim.last_dt)[2]
         ratio.append(force[0] / abs(force[1]))
-    x = sim.state.x[disk]
-    c = (m[:, None] * x).sum(axis=0) / m.sum()
-    r0, r = x0 - c0, x - c
-    turned = -np.arctan2((m * (r0[:, 0] * r[:, 1] - r0[:, 1] * r[:, 0])).sum(),
-                         (m * (r0 * r).sum(axis=1)).sum())
-    return np.array(ratio), (c - c0)[0] / R, turned
+    c = _centre(m, sim.state.x[disk])
+    return np.array(ratio), (c - c0)[0] / R, -_turned(m, x0 - c0, sim.state.x[disk] - c)
 
 
 def test_a_disk_rolled_between_frictional_plates_needs_almost_no_force():
