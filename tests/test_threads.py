@@ -104,3 +104,42 @@ assert numba.threading_layer() == "workqueue"
 results = over_bodies(lambda i: stencils(n)[1].sum(), range(6))
 assert len(set(results)) == 1 and not threads._pools
 """, NUMBA_THREADING_LAYER="workqueue")
+
+
+def test_a_kernel_called_on_one_thread_is_not_compiled_parallel():
+    """ParallelKernel: on one thread the serial twin runs (and alone is compiled: Numba's
+    parfor lowering is most of a cold run's compile time); on two the parallel version."""
+    _run_with_two_threads("""
+with threads_for(1):
+    stencils(1)
+assert compute_stencils.serial.signatures and not compute_stencils.parallel.signatures
+stencils(n)
+assert compute_stencils.parallel.signatures
+""")
+
+
+KERNEL = """
+import numba
+from softgrains.threads import parallel_kernel
+
+@parallel_kernel(cache=True)
+def thread_of_each_iteration(out):
+    for i in numba.prange(out.size):
+        out[i] = numba.get_thread_id()
+"""
+
+
+def test_the_serial_twin_and_the_parallel_kernel_keep_their_own_cache(tmp_path):
+    """Numba's cache index holds no compile flags: a twin of the same name would hand its
+    machine code to the parallel kernel in the next process. Cached serial first, the
+    parallel kernel in a fresh process must still spread the loop over two threads."""
+    (tmp_path / "twins.py").write_text(KERNEL)
+    env = os.environ | {"NUMBA_NUM_THREADS": "2", "NUMBA_CACHE_DIR": str(tmp_path / "cache"),
+                        "PYTHONPATH": str(tmp_path)}
+    call = ("import numba, numpy as np; from twins import thread_of_each_iteration as k; "
+            "numba.set_num_threads({}); out = np.zeros(1000, np.int64); k(out); "
+            "print(sorted(set(out.tolist())))")
+    used = [subprocess.run([sys.executable, "-c", call.format(threads)], env=env, check=True,
+                           capture_output=True, text=True, timeout=300).stdout.strip()
+            for threads in (1, 2)]
+    assert used == ["[0]", "[0, 1]"]

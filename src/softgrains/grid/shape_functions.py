@@ -12,6 +12,8 @@ node base + (k_0, k_1, ...) with k_j = (k // s^j) % s. Gradients are ∇N_I(x_p)
 import numpy as np
 from numba import njit, prange
 
+from softgrains.threads import parallel_kernel
+
 SHAPE_FUNCTIONS = {"linear": 0, "bspline2": 1}
 
 
@@ -42,7 +44,7 @@ def weights_1d(kind, xi, w, dw, inv_h):
     return base
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel(cache=True)
 def compute_stencils(x, origin, h, kind, base, N, dN):
     """For every point: base node (n, d), N (n, s^d) and ∇N (n, s^d, d) at positions x."""
     n, d = x.shape

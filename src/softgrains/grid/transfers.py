@@ -12,9 +12,10 @@ from numba import njit, prange
 
 from softgrains.materials.dispatch import cauchy_stress
 from softgrains.materials.tensor import determinant
+from softgrains.threads import parallel_kernel
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel(cache=True)
 def local_node_indices(base, lower, strides, s, out):
     """Local node index (in the body's box) of every stencil entry: out (n, s^d)."""
     n, d = base.shape
@@ -119,7 +120,7 @@ UPDATE_PARTICLE_THETA = 2  # v from the point's own displacement, θ-scheme
 UPDATE_PARTICLE_NEWMARK = 3  # v, a from the point's own displacement, Newmark
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel(cache=True)
 def grid_to_particles(nodes, N, dN, u_I, v_old_I, v_new_I, a_new_I, update, params,
                       law, lam, mu, vol0, x, v, a, F, sigma, vol, n_chunks):
     """Move points with the converged nodal solution and update v, a, F, σ, V (in place).

@@ -22,6 +22,7 @@ from numba import njit, prange
 from softgrains.grid.transfers import deformation_increment, matmul
 from softgrains.materials.dispatch import pk1_and_tangent, strain_energy
 from softgrains.materials.tensor import determinant
+from softgrains.threads import parallel_kernel
 
 
 @njit(cache=True)
@@ -138,7 +139,7 @@ def project_to_psd(Av, p, M):
                     Av[p, i, a, k, b] = acc
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@parallel_kernel(cache=True, nogil=True)
 def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangent, n_chunks,
                    project=False):
     """Per point: Pv = V^n P̃ (d×d) and, if ``want_tangent``, Av = V^n Ã (d×d×d×d), made
@@ -228,7 +229,7 @@ def node_point_map(nodes, active_row, n_rows):
     return ptr, entries
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@parallel_kernel(cache=True, nogil=True)
 def gather_forces(ptr, entries, dN, Pv, f):
     """f_r = −Σ_{(p,k) at r} (V^n P̃_p) ∇N_k(X_p), row-parallel (f: (n_rows, d))."""
     n_rows, d = f.shape
@@ -244,7 +245,7 @@ def gather_forces(ptr, entries, dN, Pv, f):
             f[r, i] = -acc
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@parallel_kernel(cache=True, nogil=True)
 def gather_tangent(ptr, entries, dN, Av, slot, codes, data):
     """BSR data (nnzb, d, d) of K: block (r, c) = Σ_p ∇N_a · (V^n Ã_p) · ∇N_b, row-parallel.
 
@@ -278,7 +279,7 @@ def gather_tangent(ptr, entries, dN, Av, slot, codes, data):
                         data[q, i, k] += acc
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@parallel_kernel(cache=True, nogil=True)
 def gather_consistent_mass(ptr, entries, N, mass, slot, codes, m_blocks):
     """Consistent mass M_IJ = Σ_p m_p N_I(X_p) N_J(X_p) (a scalar per block), row-parallel."""
     n_rows = ptr.shape[0] - 1
@@ -298,7 +299,7 @@ def gather_consistent_mass(ptr, entries, N, mass, slot, codes, m_blocks):
                     m_blocks[q] += w * N[p, kb]
 
 
-@njit(cache=True, parallel=True, nogil=True)
+@parallel_kernel(cache=True, nogil=True)
 def block_scalar_matvec(indptr, indices, m_blocks, u, out):
     """out = (M ⊗ I_d) u for a matrix M with one scalar per block of the BSR pattern."""
     n_rows, d = out.shape

@@ -5,17 +5,17 @@
 """
 
 import numpy as np
-from numba import njit, prange
+from numba import prange
 
 from softgrains.materials.dispatch import strain_energy as _w
-from softgrains.threads import threads_for
+from softgrains.threads import parallel_kernel, threads_for
 
 
 def kinetic_energy(mass: np.ndarray, v: np.ndarray) -> float:
     return float(0.5 * np.sum(mass * np.sum(v * v, axis=1)))
 
 
-@njit(cache=True, parallel=True)
+@parallel_kernel(cache=True)
 def _strain_energies(law, F, lam, mu, vol0, out):
     for p in prange(F.shape[0]):
         out[p] = vol0[p] * _w(law[p], F[p], lam[p], mu[p])
