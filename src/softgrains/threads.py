@@ -69,9 +69,10 @@ class ParallelKernel:
     a body below PARALLEL_MIN_POINTS inside :class:`threads_for`, the workers of
     :func:`over_bodies`). The same loops in the same order give the same results; the
     twin only spares the compilation of the parallel version where it never runs: Numba's
-    parfor lowering made ``point_stresses`` take 15.2 s to compile instead of 5.6 s, and a
-    run's first step ~52 s instead of ~34 s (2026-12-06, this 2-core machine with two other
-    processes; a fresh clone's README job compiles in each of its two processes)."""
+    parfor lowering made ``point_stresses`` take 15.2 s to compile instead of 5.6 s, and
+    the frictional example's first step from cold caches 56.7 s instead of 37.1 s
+    (2026-12-06, this 2-core machine beside two other runs; a fresh clone's README job
+    compiles in each of its two processes, each on one thread)."""
 
     def __init__(self, function: Callable, **options) -> None:
         self.parallel = numba.njit(parallel=True, **options)(function)
