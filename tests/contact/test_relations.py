@@ -408,7 +408,9 @@ def test_a_loaded_sliding_contact_is_not_ratcheted_by_the_gap_scatter():
         top = block[np.abs(block[:, 0] - centre) <= 1.5 * delta, 1].max() + delta / 2
         sink[keep] = (top - bottom) / h
         assert centre > 0.7  # it slid
-    assert 0.0 < sink[True] < 0.6 * sink[False]
+    # (no lower bound: a contact that held the disk out of the block entirely, sink ≤ 0,
+    # is what D10 asks for, not a failure)
+    assert sink[False] > 0.0 and sink[True] < 0.6 * sink[False]
 
 
 def test_a_run_with_unconverged_steps_never_ends_as_plain_completed(tmp_path):

@@ -7,6 +7,13 @@ Measured (2026-11-23) u_y: −2.735 (h = 0.25), −2.628 (h = 0.125), −2.584 m
 34 s, not in the suite): errors 9.0%, 4.7%, 3.0%, converging. Linear hats at h = 0.0625 give
 −2.749 (9.5%): they converge much more slowly in bending, and the Newton iteration fails at
 h = 0.25 and 0.125 with Δt = 0.5 s.
+
+u_x (measured 2026-12-06): −1.710 / −1.606 / −1.553 m at h = 0.25 / 0.125 / 0.0625, errors
+16.3 / 9.2 / 5.6%: A4's "within 5% at the finest resolution the suite runs" is met by u_y
+(4.7% at h = 0.125) but not by u_x, which converges at first order (differences +0.104,
++0.053 m). Its limit is what is compared: the first-order extrapolation from h = 0.25 and
+0.125, 2 u(h/2) − u(h), is −1.502 / −2.521 m (2.2 / 0.4% from the reference; from the
+three levels about −1.50 / −2.55 m).
 """
 
 import numpy as np
@@ -32,13 +39,15 @@ def _static_corner_displacement(run_example, h):
 
 
 def test_static_deflection_converges_to_the_reference(run_example):
-    errors = []
+    corners = []
     for h in (0.25, 0.125):
-        u = _static_corner_displacement(run_example, h)
-        errors.append(abs(u[1] / REFERENCE[1] - 1.0))
-        print(f"h = {h}: corner displacement {u}, error u_y {errors[-1]:.3f}")
-    assert errors[-1] < 0.05
-    assert errors[1] < 0.7 * errors[0]
+        corners.append(_static_corner_displacement(run_example, h))
+        print(f"h = {h}: corner displacement {corners[-1]}")
+    coarse, fine = (np.abs(u / REFERENCE - 1.0) for u in corners)  # (u_x, u_y) errors
+    assert fine[1] < 0.05  # u_y at the finest resolution (4.7%; u_x 9.2%: docstring)
+    assert np.all(fine < 0.7 * coarse)  # both converging, at first order or faster
+    limit = 2.0 * corners[1] - corners[0]  # first-order extrapolation to h → 0
+    assert np.all(np.abs(limit / REFERENCE - 1.0) < 0.05)  # 2.2% (u_x), 0.4% (u_y)
 
 
 def test_newton_converges_quadratically(run_example):

@@ -43,10 +43,12 @@ def _run(mu):
     t, force, x = [], [], []
     for _ in range(sim.n_steps):
         diag = sim.step()
-        assert diag.contact.converged
         t.append(sim.state.time)
         force.append(diag.contact_forces(2, 2, sim.dt)[0, 1] / weight_n)
         x.append(sim.state.x[block, 0].mean())
+    # every step at the nominal Δt (none retried shorter by the step-size controller: a
+    # step whose coupled solve failed is retried, so its diagnostics always read converged)
+    assert sim.retried_steps == 0
     return np.array(t), np.array(force), np.array(x)
 
 

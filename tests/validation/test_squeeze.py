@@ -12,9 +12,11 @@ The case is the benchmark's (benchmarks/squeeze_convergence.py): R = 0.5 m, E = 
     20    2.4%, −0.008 h (65 steps)   2.0%, −0.0005 h (30 steps)
     40    1.3%, −0.003 h (74 steps)   1.2%, −0.0003 h (60 steps)
 
-At Δt c/h 3000 the coupling loop stalls on some steps (the disk's residual cycling while
-points enter and leave the plates' reach) and the step-size controller redoes them at
-Δt/2…Δt/8, growing Δt back after 5 converged steps: 65 steps instead of 30. With nodal
+At Δt c/h 3000 the coupling loop stalls on some steps (the disk's rotation, a near-neutral
+mode of the loaded disk: docs/dev-notes.md #11 item 0a) and the step-size controller redoes
+them shorter, growing Δt back after 5 converged steps: at D/h 20 65 steps instead of 30 on
+2026-12-04 (down to Δt/8), 38 with 3 retried at Δt/2 since session 38's bounded iterates
+(2.7%, −0.010 h; 2026-12-06). With nodal
 plate contacts (the default until session 22): 2.9% / 1.2% at D/h 20 / 40 quasi-static,
 least gap −0.047 h. With linear hats the same runs are 11% (D/h 20) and 14% (D/h 40) too
 soft, and refining makes it worse: the cause of failures 2 and 4 of issue 11
@@ -45,23 +47,34 @@ def test_squeezed_disk_force_follows_the_finite_element_reference(dt_c_over_h):
     bench = _benchmark()
     case = bench.squeeze_case(20, dt_c_over_h, 0.1)
     sim = Simulation(load_case(case))
-    strain, force = [], []
-    while not sim.at_end:
+    h = sim.model.lattice.h
+    strain, force, inside = [], [], []
+    while not sim.at_end:  # (a step whose coupled solve fails is retried shorter or stops)
         diag = sim.step()
-        assert diag.contact.converged
         offset = sim.state.body_offset
         strain.append((offset[1][1] - offset[2][1]) / (2 * bench.R))
         force.append(diag.contact_forces(3, 2, sim.last_dt)[2, 1] / (bench.E * bench.R))
+        inside.append(bench.penetration(sim, h))
     reference = np.loadtxt(bench.REFERENCE, delimiter=",", skiprows=1)
     strain, force = np.array(strain), np.array(force)
     assert strain[-1] == pytest.approx(0.30, abs=1e-9)
     window = (strain >= 0.05 - 1e-9) & (strain <= 0.30 + 1e-9)
     error = force[window] / np.interp(strain[window], reference[:, 0], reference[:, 1]) - 1.0
     assert np.abs(error).max() < BAR, np.round(error, 4)
-    # the contact's own end-of-step gap at the active contacts, D10's 0.05 h (measured:
-    # −0.008 h quasi-static, −0.0005 h dynamic; nodal plate contacts −0.047 h / −0.036 h;
-    # linear hats −0.225 h)
-    assert sim.largest_penetration < 0.05 * sim.model.lattice.h
+    # D10's steps stay what they are said to be: the dynamic ones at their Δt, the
+    # quasi-static ones at Δt c/h ≥ 10³ where the controller retried one shorter
+    # (measured 2026-12-06: none retried / 3 retried at Δt/2, Δt c/h 1500)
+    if dt_c_over_h < 1000.0:
+        assert sim.retried_steps == 0
+    else:
+        assert dt_c_over_h * sim.smallest_dt_factor >= 1000.0
+    # the plates never inside the disk by more than 0.05 h (D10): the contact's own
+    # start-of-step gap at the active contacts (measured −0.010 h quasi-static, −0.0005 h
+    # dynamic; nodal plate contacts −0.047 h / −0.036 h; linear hats −0.225 h), and the
+    # points' round cells against the plates' faces at the end of every step (0.012 h /
+    # 0.0005 h)
+    assert sim.largest_penetration < 0.05 * h
+    assert max(inside) < 0.05
 
 
 def _theta_half_flip_squeeze(wall_sites):
@@ -157,8 +170,8 @@ def test_a_frictional_squeeze_mirrors_the_negative_modes_and_keeps_its_solution(
         force = []
         while not sim.at_end:
             diag = sim.step()
-            assert diag.contact.converged
             force.append(diag.contact_forces(3, 2, sim.last_dt)[2, 1])
+        assert sim.retried_steps == 0  # both runs step for step at Δt: forces compared
         return np.array(force), sum(used), sum(projected)
 
     mirrored, used, projected = run(True)
