@@ -4,9 +4,10 @@ differing in round-off end 2% apart), so the effect of h is told from the seeds'
 
 Reads completed compaction runs — the members of a sweep (``softgrains sweep``) over
 ``grid.cell_size`` and ``simulation.seed`` (and ``contact.friction``), or run folders given
-one by one — and prints per friction and cell size: the members, the mean of φ0 (the
-pre-compacted φ at σ0) and of φ where σ_yy/σ0 first reaches each level, their standard
-deviation, and the change of the mean from the coarsest cell with its 95% band (t quantile
+one by one — and prints per friction and resolution (cell size, points per cell per axis,
+the grains' outer ring density): the members, the mean of φ0 (the pre-compacted φ at σ0)
+and of φ where σ_yy/σ0 first reaches each level, their standard deviation, and the change
+of the mean from the coarsest (the largest point spacing) with its 95% band (t quantile
 × the two means' combined standard error, Welch). A change whose band holds 0 is not told
 from the sample spread. With ``--response`` also the compaction's own response φ − φ0 at
 each level (the pre-compacted state's spread taken out), and where the same seeds ran at
@@ -40,8 +41,22 @@ sys.path.insert(0, str(Path(__file__).parent))
 from compaction_sensitivity import phi_at_levels  # noqa: E402
 
 
+def resolution(case: dict) -> tuple[float, int, int]:
+    """A run's resolution: (cell size, points per cell per axis, the grains' outer ring
+    density), from its resolved case.toml (defaults where a key is absent)."""
+    density = case.get("sample", {}).get("outer_ring_density", 1)
+    return (case["grid"]["cell_size"], case["grid"].get("points_per_cell", 2), density)
+
+
+def coarse_first(key: tuple[float, int, int]) -> tuple[float, int]:
+    """Sort key of resolutions: the largest point spacing first, then the sparsest outer
+    ring."""
+    cell, per_cell, density = key
+    return (-cell / per_cell, density)
+
+
 def collect(paths: list[Path], levels: list[float]) -> dict:
-    """{(friction, cell size): {seed: (φ0, {level: φ})}} over the completed runs: each path
+    """{(friction, resolution): {seed: (φ0, {level: φ})}} over the completed runs: each path
     a run folder or a sweep's folder of members, each read from its resolved case.toml (a
     sweep may still be running)."""
     found = defaultdict(dict)
@@ -53,7 +68,7 @@ def collect(paths: list[Path], levels: list[float]) -> dict:
             if json.loads(summary.read_text()).get("status") != "completed":
                 continue
             case = tomllib.loads((member / "case.toml").read_text())
-            key = (case["contact"]["friction"], case["grid"]["cell_size"])
+            key = (case["contact"]["friction"], resolution(case))
             found[key][case["simulation"]["seed"]] = phi_at_levels(member, levels)
     return found
 
@@ -100,11 +115,12 @@ def main() -> None:
     quantities = ["phi0", *args.levels]
     if args.response:
         quantities += [("response", level) for level in args.levels]
-    print("| friction | cell size | members | quantity | mean | sd | change of the mean "
-          "from the coarsest (95% band) | paired by seed: seeds, mean change (95% band) |")
+    print("| friction | cell size / points per cell / outer ring | members | quantity | mean "
+          "| sd | change of the mean from the coarsest (95% band) | paired by seed: seeds, "
+          "mean change (95% band) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     for group in groups:
-        cells = sorted((c for g, c in found if g == group), reverse=True)
+        cells = sorted((c for g, c in found if g == group), key=coarse_first)
         label = f"μ {group:g}"
         for quantity in quantities:
             coarse_runs = found[group, cells[0]]
@@ -125,7 +141,8 @@ def main() -> None:
                         pairs = np.array([value(runs[s], quantity)
                                           - value(coarse_runs[s], quantity) for s in seeds])
                         paired = f"{len(seeds)}, {pairs.mean():+.4f} ± {paired_band(pairs):.4f}"
-                print(f"| {label} | {cell:g} | {v.size} | {name(quantity)} | {v.mean():.4f} | "
+                print(f"| {label} | {cell[0]:g} / {cell[1]} / {cell[2]} | {v.size} | "
+                      f"{name(quantity)} | {v.mean():.4f} | "
                       f"{v.std(ddof=1) if v.size > 1 else float('nan'):.4f} | {change} | "
                       f"{paired} |")
 

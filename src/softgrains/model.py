@@ -43,6 +43,7 @@ class BodySpec:
     points: slice
     shape: Shape
     seeding: str = "lattice"  # "rings": disk points on concentric rings (geometry/shapes.py)
+    outer_ring_density: int = 1  # rings: the outer ring's points per point spacing
 
     @property
     def deformable(self) -> bool:
@@ -84,7 +85,8 @@ class Model:
         ring-seeded disk (geometry.PointCells)."""
         spacing = self.lattice.h / self.points_per_cell
         return PointCells.concatenate([
-            disk_ring_cells(body.shape, spacing) if body.seeding == "rings"
+            disk_ring_cells(body.shape, spacing, body.outer_ring_density)
+            if body.seeding == "rings"
             else lattice_cells(self.vol0[body.points], self.dim) for body in self.bodies])
 
 
@@ -143,7 +145,7 @@ def build(case) -> tuple[Model, State]:
                 raise CaseError(f"[bodies.{b}] ('{name}'): radius {body.radius:g} is below one "
                                 f"point spacing ({spacing:g}) for seeding = 'rings'; make it "
                                 "larger or the grid finer.")
-            x, v0 = seed_disk_rings(shape, spacing)
+            x, v0 = seed_disk_rings(shape, spacing, body.outer_ring_density)
         else:
             x, v0 = seed_points(shape, lattice.domain_lower, grid.cell_size,
                                 grid.points_per_cell)
@@ -163,7 +165,7 @@ def build(case) -> tuple[Model, State]:
         mus.append(np.full(n, mu))
         ids.append(np.full(n, b, dtype=np.int64))
         bodies.append(BodySpec(b, name, body.kind, body.material, slice(start, start + n), shape,
-                               body.seeding))
+                               body.seeding, body.outer_ring_density))
         start += n
     x = np.concatenate(xs)
     n = len(x)

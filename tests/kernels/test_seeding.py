@@ -75,3 +75,34 @@ def test_ring_seeded_disk_smaller_than_a_point_spacing_is_a_case_error():
     case["bodies"][0]["radius"] = 0.01  # spacing 0.025
     with pytest.raises(CaseError, match="radius 0.01 is below one point spacing"):
         build(load_case(case))
+
+
+@pytest.mark.parametrize("outer", [2, 3])
+def test_a_denser_outer_ring_keeps_the_disk_and_divides_its_outer_cells(outer):
+    """outer_ring_density: the outermost ring holds `outer` times its points, each of
+    1/outer the volume; the other rings and the disk's volume are unchanged, and the ring
+    sectors still tile it (the cells' areas are the points' volumes)."""
+    from softgrains.geometry import disk_ring_cells
+
+    disk, spacing = Disk(np.array([0.2, -0.1]), 0.05), 0.0025
+    x1, vol1 = seed_disk_rings(disk, spacing)
+    x2, vol2 = seed_disk_rings(disk, spacing, outer)
+    r1, r2 = (np.linalg.norm(x - disk.center, axis=1) for x in (x1, x2))
+    rim1, rim2 = np.isclose(r1, r1.max()), np.isclose(r2, r2.max())
+    assert r2.max() == pytest.approx(r1.max(), rel=1e-12)
+    assert rim2.sum() == outer * rim1.sum()
+    assert np.allclose(vol2[rim2], vol1[rim1][0] / outer)
+    assert np.array_equal(x2[~rim2], x1[~rim1]) and np.array_equal(vol2[~rim2], vol1[~rim1])
+    assert vol2.sum() == pytest.approx(np.pi * disk.radius**2, rel=1e-12)
+    assert np.allclose(disk_ring_cells(disk, spacing, outer).area(), vol2)
+
+
+def test_outer_ring_density_is_for_ring_seeding_only():
+    case = _case("disk", "lattice")
+    case["bodies"][0]["outer_ring_density"] = 2
+    with pytest.raises(CaseError, match="outer_ring_density"):
+        load_case(case)
+    case["bodies"][0]["seeding"] = "rings"
+    model, _ = build(load_case(case))
+    assert model.bodies[0].outer_ring_density == 2
+    assert model.vol0.sum() == pytest.approx(np.pi * 0.04, rel=1e-12)

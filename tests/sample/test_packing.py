@@ -232,3 +232,16 @@ def test_a_case_deposits_the_same_sample_at_every_cell_size():
         centres.append(np.array([b.center for b in case.bodies if b.shape == "disk"]))
     assert len(centres[0]) == 30
     assert np.array_equal(centres[0], centres[1]) and np.array_equal(centres[0], centres[2])
+
+
+def test_a_sample_passes_its_outer_ring_density_to_its_grains():
+    from pathlib import Path
+
+    from softgrains import load_case
+
+    example = Path(__file__).resolve().parents[2] / "examples" / "compaction_frictional.toml"
+    case = load_case(example, {"sample.outer_ring_density": 2})
+    grains = [b for b in case.bodies if b.shape == "disk"]
+    assert len(grains) == 30 and all(b.outer_ring_density == 2 for b in grains)
+    walls = [b for b in case.bodies if b.shape != "disk"]
+    assert walls and all(b.outer_ring_density == 1 for b in walls)

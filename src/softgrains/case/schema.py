@@ -211,6 +211,10 @@ class Body(_Section):
     seeding: Literal["lattice", "rings"] = Field(
         "lattice", description="material points on the grid-aligned sub-lattice, or on "
         "concentric rings (disks only: a round boundary instead of a staircase)")
+    outer_ring_density: int = Field(
+        1, ge=1, le=4, description="seeding = 'rings': points on the outermost ring per "
+        "point spacing along it (each of 1/density the volume); the outer points are the "
+        "disk's contact sites against other grains")
     _generated: bool = PrivateAttr(False)  # made by [sample], not written back
 
     @property
@@ -263,6 +267,9 @@ class Body(_Section):
         if self.seeding == "rings" and self.shape != "disk":
             message = f"'rings' is only for shape = 'disk', not '{self.shape}': use 'lattice'"
             problems.append(Problem(("seeding",), self.seeding, message))
+        if self.outer_ring_density != 1 and self.seeding != "rings":
+            message = "only for seeding = 'rings': remove it"
+            problems.append(Problem(("outer_ring_density",), self.outer_ring_density, message))
         if self.kind == "kinematic":
             for key in ("velocity_gradient", "velocity_sine"):
                 value = getattr(self, key)
@@ -392,6 +399,9 @@ class SampleSettings(_Section):
         "grain of exactly its volume) or the grid-aligned lattice (a staircase whose "
         "corners make the grains rough at the scale of the cell: the packing fraction "
         "then moves with h; see [[bodies]] seeding)")
+    outer_ring_density: int = Field(
+        1, ge=1, le=4, description="seeding = 'rings': points on each grain's outermost "
+        "ring per point spacing along it (see [[bodies]] outer_ring_density)")
 
 
 class ProtocolSettings(_Section):
@@ -528,6 +538,8 @@ class Case(_Section):
                                 "this name is taken by a generated [sample] body; rename it")]
             if table["shape"] == "disk":
                 table["seeding"] = sample.seeding
+                if sample.seeding == "rings":
+                    table["outer_ring_density"] = sample.outer_ring_density
             body = Body(**table)
             body._generated = True
             self.bodies.append(body)

@@ -136,7 +136,7 @@ def seed_points(shape: Shape, origin: np.ndarray, h: float, n_pc: int) -> tuple[
     return x[shape.contains(x)], delta ** len(origin)
 
 
-def _disk_rings(disk: Disk, spacing: float):
+def _disk_rings(disk: Disk, spacing: float, outer: int = 1):
     """The rings of :func:`seed_disk_rings`: per ring its radius r_k, width Δr and the
     angles of its points."""
     rings = max(1, round(disk.radius / spacing))
@@ -144,20 +144,23 @@ def _disk_rings(disk: Disk, spacing: float):
     turn = 0.0
     for k in range(rings):
         r = (k + 0.5) * dr
-        n = max(3, round(2.0 * np.pi * r / spacing))
+        n = max(3, round(2.0 * np.pi * r / spacing)) * (outer if k == rings - 1 else 1)
         yield r, dr, turn + 2.0 * np.pi * np.arange(n) / n
         turn += np.pi / n
 
 
-def seed_disk_rings(disk: Disk, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+def seed_disk_rings(disk: Disk, spacing: float, outer: int = 1
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """Points of a disk on concentric rings; returns (x (n, 2), volume (n,)).
 
     N = max(1, round(R/δ)) rings of width Δr = R/N; ring k (radius r_k = (k + ½) Δr) holds
     n_k = max(3, round(2π r_k/δ)) points at equal angles (ring k turned by half a spacing
     against ring k − 1), each of volume 2π r_k Δr / n_k: the volumes add up to πR² exactly.
+    The outermost ring holds ``outer`` × n_k points (the disk's contact sites against other
+    grains are its outer points).
     """
     xs, vols = [], []
-    for r, dr, angle in _disk_rings(disk, spacing):
+    for r, dr, angle in _disk_rings(disk, spacing, outer):
         xs.append(np.column_stack([r * np.cos(angle), r * np.sin(angle)]))
         vols.append(np.full(angle.size, 2.0 * np.pi * r * dr / angle.size))
     return np.concatenate(xs) + np.asarray(disk.center, dtype=float), np.concatenate(vols)
@@ -188,12 +191,12 @@ class PointCells:
                           np.concatenate([p.shape for p in parts]))
 
 
-def disk_ring_cells(disk: Disk, spacing: float) -> PointCells:
+def disk_ring_cells(disk: Disk, spacing: float, outer: int = 1) -> PointCells:
     """The ring sectors of :func:`seed_disk_rings`' points, in the same order: frame
     (e_r, e_θ) at each point, shape (r_k, Δr, π/n_k); area 2π r_k Δr/n_k, the point's
     volume, and together they tile the disk."""
     frames, shapes = [], []
-    for r, dr, angle in _disk_rings(disk, spacing):
+    for r, dr, angle in _disk_rings(disk, spacing, outer):
         c, s = np.cos(angle), np.sin(angle)
         frames.append(np.stack([np.column_stack([c, -s]), np.column_stack([s, c])], axis=1))
         shapes.append(np.tile([r, dr, np.pi / angle.size], (angle.size, 1)))
