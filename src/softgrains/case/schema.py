@@ -212,9 +212,10 @@ class Body(_Section):
         "lattice", description="material points on the grid-aligned sub-lattice, or on "
         "concentric rings (disks only: a round boundary instead of a staircase)")
     outer_ring_density: int = Field(
-        1, ge=1, le=4, description="seeding = 'rings': points on the outermost ring per "
+        1, ge=1, le=2, description="seeding = 'rings': points on the outermost ring per "
         "point spacing along it (each of 1/density the volume); the outer points are the "
-        "disk's contact sites against other grains")
+        "disk's contact sites against other grains (3 made the dense compaction's contact "
+        "problems unsolvable: more sites than the nodal velocities can tell apart)")
     _generated: bool = PrivateAttr(False)  # made by [sample], not written back
 
     @property
@@ -400,7 +401,7 @@ class SampleSettings(_Section):
         "corners make the grains rough at the scale of the cell: the packing fraction "
         "then moves with h; see [[bodies]] seeding)")
     outer_ring_density: int = Field(
-        1, ge=1, le=4, description="seeding = 'rings': points on each grain's outermost "
+        1, ge=1, le=2, description="seeding = 'rings': points on each grain's outermost "
         "ring per point spacing along it (see [[bodies]] outer_ring_density)")
 
 
