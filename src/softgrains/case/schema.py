@@ -214,8 +214,9 @@ class Body(_Section):
     outer_ring_density: int = Field(
         1, ge=1, le=2, description="seeding = 'rings': points on the outermost ring per "
         "point spacing along it (each of 1/density the volume); the outer points are the "
-        "disk's contact sites against other grains (3 made the dense compaction's contact "
-        "problems unsolvable: more sites than the nodal velocities can tell apart)")
+        "disk's contact sites against other grains (experimental: redundant sites, more "
+        "than the nodal velocities can tell apart, can leave a dense frictional packing's "
+        "contact problem without a solution; 3 did, and 2 on one sample in six)")
     _generated: bool = PrivateAttr(False)  # made by [sample], not written back
 
     @property
