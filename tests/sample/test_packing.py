@@ -245,3 +245,14 @@ def test_a_sample_passes_its_outer_ring_density_to_its_grains():
     assert len(grains) == 30 and all(b.outer_ring_density == 2 for b in grains)
     walls = [b for b in case.bodies if b.shape != "disk"]
     assert walls and all(b.outer_ring_density == 1 for b in walls)
+
+
+def test_a_sample_outer_ring_density_needs_ring_seeding():
+    from pathlib import Path
+
+    from softgrains import load_case
+    from softgrains.errors import CaseError
+
+    example = Path(__file__).resolve().parents[2] / "examples" / "compaction_frictional.toml"
+    with pytest.raises(CaseError, match=r"sample\.outer_ring_density.*seeding = 'rings'"):
+        load_case(example, {"sample.outer_ring_density": 2, "sample.seeding": "lattice"})

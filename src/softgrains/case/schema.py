@@ -405,6 +405,14 @@ class SampleSettings(_Section):
         1, ge=1, le=2, description="seeding = 'rings': points on each grain's outermost "
         "ring per point spacing along it (see [[bodies]] outer_ring_density)")
 
+    @model_validator(mode="after")
+    def _check_outer_ring(self) -> SampleSettings:
+        if self.outer_ring_density != 1 and self.seeding != "rings":
+            message = "only for seeding = 'rings': remove it"
+            raise Problems([Problem(("outer_ring_density",), self.outer_ring_density,
+                                    message)])
+        return self
+
 
 class ProtocolSettings(_Section):
     """``[protocol]``: a loading programme driving the walls of a ``[sample]``."""
@@ -540,8 +548,7 @@ class Case(_Section):
                                 "this name is taken by a generated [sample] body; rename it")]
             if table["shape"] == "disk":
                 table["seeding"] = sample.seeding
-                if sample.seeding == "rings":
-                    table["outer_ring_density"] = sample.outer_ring_density
+                table["outer_ring_density"] = sample.outer_ring_density
             body = Body(**table)
             body._generated = True
             self.bodies.append(body)
