@@ -1,6 +1,7 @@
 """VALIDATION.md C9's "φ(σ) moves by less than 1% when Δt is halved and when h is halved",
-on a sample whose path does not branch: two equal disks side by side in a box two diameters wide, compacted by the
-example's protocol (pre-compaction under σ0, top wall at 5 m/s to 300 σ0) at D/h 10 and 20.
+on a sample whose path does not branch: two equal disks side by side in a box two diameters
+wide, compacted by the example's protocol (pre-compaction under σ0, top wall at 5 m/s to
+300 σ0) at D/h 10 and 20.
 
 The 30-grain example's curve is chaotic (its grains rearrange; round-off alone moved φ by
 1.8% at 100 σ0), so the effect of h on it is told from seed ensembles (docs/dev-notes.md,

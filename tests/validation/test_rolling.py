@@ -193,10 +193,12 @@ def test_a_disk_rolled_between_frictional_plates_needs_almost_no_force():
 
 
 def test_a_denser_outer_ring_cogs_less():
-    """The cogging is the contact sites' (the outer points'): with twice the points on the
-    outer ring (outer_ring_density = 2) the D/h 10 roller's F_x / F_y swings over 0.043
-    instead of 0.067 (measured 2026-12-06; three points per cell per axis: 0.041; at D/h 20
-    0.0156 against 0.015 — there the grid's share is left)."""
+    """The cogging is the outer points': with twice the points on the outer ring
+    (outer_ring_density = 2) the D/h 10 roller's F_x / F_y swings over 0.043 instead of 0.067
+    (measured 2026-12-06; three points per cell per axis: 0.041; at D/h 20 0.0156 against
+    0.015 — there the grid's share is left). Both as sites and as material: the added points
+    as contact sites alone (massless) 0.064, as quadrature points alone (not sites) 0.061
+    (session 43, docs/dev-notes.md)."""
     swings = []
     for density in (1, 2):
         ratio, moved, turned = roller(10, outer_ring_density=density)
