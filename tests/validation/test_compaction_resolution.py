@@ -51,40 +51,52 @@ def phi_at_levels(out) -> tuple[float, np.ndarray]:
         series["stress_yy"][compaction] / protocol["sigma0"], series["phi"][compaction], LEVELS)
 
 
+@pytest.fixture(scope="module")
+def compacted(tmp_path_factory):
+    """run(cell_size, dt, friction) → (summary, (φ0, φ at LEVELS)) of the pair's compaction,
+    each run once per module (the D/h 10 runs at 20 µs serve both tests below)."""
+    done = {}
+
+    def run(cell_size: float, dt: float, friction: float):
+        key = (cell_size, dt, friction)
+        if key not in done:
+            out = tmp_path_factory.mktemp(f"pair_h{cell_size:g}_dt{dt:g}_mu{friction:g}")
+            case = load_case(EXAMPLES / "compaction_frictionless.toml",
+                             pair_of_disks(cell_size, dt, friction))
+            done[key] = Simulation(case, out=out).run(), phi_at_levels(out)
+        return done[key]
+
+    return run
+
+
 @pytest.mark.parametrize("friction", [0.0, 0.5])
-def test_a_pair_of_disks_compacts_the_same_when_h_is_halved(tmp_path, friction):
+def test_a_pair_of_disks_compacts_the_same_when_h_is_halved(compacted, friction):
     results = []
     for cell_size, dt in ((1e-3, 2e-5), (5e-4, 1e-5)):  # D/h 10 and 20, the same Δt c/h
-        out = tmp_path / f"h{cell_size:g}"
-        case = load_case(EXAMPLES / "compaction_frictionless.toml",
-                         pair_of_disks(cell_size, dt, friction))
-        summary = Simulation(case, out=out).run()
+        summary, phi = compacted(cell_size, dt, friction)
         assert summary["status"] == "completed"
         assert summary["protocol"]["precompaction_equilibrium"] is True
         # the second disk seated beside the first (measured h0 = 8.880 mm for D = 8.9 mm)
         assert summary["protocol"]["h0"] < 1.05 * 0.0089
         assert "σ_yy/σ0" in summary["protocol"]["stop_reason"]
-        results.append(phi_at_levels(out))
+        results.append(phi)
     (phi0_coarse, coarse), (phi0_fine, fine) = results
     assert abs(phi0_fine / phi0_coarse - 1.0) < 0.01
     assert np.all(np.abs(fine / coarse - 1.0) < 0.01), (coarse, fine)
 
 
 @pytest.mark.parametrize("friction", [0.0, 0.5])
-def test_a_pair_of_disks_compacts_the_same_when_dt_is_halved(tmp_path, friction):
+def test_a_pair_of_disks_compacts_the_same_when_dt_is_halved(compacted, friction):
     """The same pair at D/h 10, the compaction at Δt = 20 µs and 10 µs (the pre-compaction
     runs at its own step: φ0 is the same). Measured (2026-12-06): φ at 2–300 σ0 moves by
     ≤ 0.04% for both frictions (and by ≤ 0.04% again from 10 to 5 µs). A contact model
     that depends on the step (e.g. overlap removal as a fraction per step) fails it."""
     results = []
     for dt in (2e-5, 1e-5):
-        out = tmp_path / f"dt{dt:g}"
-        case = load_case(EXAMPLES / "compaction_frictionless.toml",
-                         pair_of_disks(1e-3, dt, friction))
-        summary = Simulation(case, out=out).run()
+        summary, phi = compacted(1e-3, dt, friction)
         assert summary["status"] == "completed" and summary["retried_steps"] == 0
         assert "σ_yy/σ0" in summary["protocol"]["stop_reason"]
-        results.append(phi_at_levels(out))
+        results.append(phi)
     (phi0_coarse, coarse), (phi0_fine, fine) = results
     assert phi0_fine == pytest.approx(phi0_coarse, rel=1e-12)
     assert np.all(np.abs(fine / coarse - 1.0) < 0.01), (coarse, fine)

@@ -55,6 +55,14 @@ class Problems(ValueError):
         self.problems = problems
 
 
+def _outer_ring_problems(seeding: str, outer_ring_density: int) -> list[Problem]:
+    """outer_ring_density other than 1 without ring seeding (bodies and [sample])."""
+    if outer_ring_density != 1 and seeding != "rings":
+        return [Problem(("outer_ring_density",), outer_ring_density,
+                        "only for seeding = 'rings': remove it")]
+    return []
+
+
 def _zero_vector() -> list[float]:
     """The default for vectors; of length 2, the only dimension supported so far."""
     return [0.0, 0.0]
@@ -269,9 +277,7 @@ class Body(_Section):
         if self.seeding == "rings" and self.shape != "disk":
             message = f"'rings' is only for shape = 'disk', not '{self.shape}': use 'lattice'"
             problems.append(Problem(("seeding",), self.seeding, message))
-        if self.outer_ring_density != 1 and self.seeding != "rings":
-            message = "only for seeding = 'rings': remove it"
-            problems.append(Problem(("outer_ring_density",), self.outer_ring_density, message))
+        problems += _outer_ring_problems(self.seeding, self.outer_ring_density)
         if self.kind == "kinematic":
             for key in ("velocity_gradient", "velocity_sine"):
                 value = getattr(self, key)
@@ -407,10 +413,9 @@ class SampleSettings(_Section):
 
     @model_validator(mode="after")
     def _check_outer_ring(self) -> SampleSettings:
-        if self.outer_ring_density != 1 and self.seeding != "rings":
-            message = "only for seeding = 'rings': remove it"
-            raise Problems([Problem(("outer_ring_density",), self.outer_ring_density,
-                                    message)])
+        problems = _outer_ring_problems(self.seeding, self.outer_ring_density)
+        if problems:
+            raise Problems(problems)
         return self
 
 
