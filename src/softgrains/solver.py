@@ -71,6 +71,7 @@ class Solver:
             on_failure=c.on_failure, normal=c.normal, overlap_removal=c.overlap_removal,
             overlap_tolerance=c.overlap_tolerance, keep_closed=c.keep_closed, solver=c.solver,
             solver_iterations=c.solver_iterations, grain_sites=c.grain_sites,
+            grain_passes=c.grain_passes,
             wall_sites=c.wall_sites, end_gap_check=c.end_gap_check, motion_limit=motion_limit)
 
     def body_points(self, state: State, index: int) -> BodyPoints:

@@ -228,6 +228,33 @@ def _pair_steps(h: float, seeding: str, separation: float, angle: float, shift):
                         for i, c in enumerate(centres)], h=h, size=3.6)
 
 
+def test_one_pass_takes_the_smaller_grains_points_only():
+    """``grain_passes = "one"``: of two ring disks of radii 0.5 and 0.65 (D/h 10), 0.1 h
+    apart or overlapping by 0.1 h, the contacts are the smaller disk's outer points
+    against the larger one's surface, exactly those of the full two passes, whatever the
+    pair's order; a ring-seeded body samples first against one of another seeding."""
+    h = 0.1
+    for separation in (0.1 * h, -0.1 * h):
+        for order in ((0.5, 0.65), (0.65, 0.5)):
+            first = np.array([1.6, 1.7])
+            second = first + (sum(order) + separation) * np.array([0.8, 0.6])
+            disks = zip((first, second), order, strict=True)
+            steps = _body_steps([{"name": f"disk{i}", "shape": "disk", "center": list(c),
+                                  "radius": r, "seeding": "rings"}
+                                 for i, (c, r) in enumerate(disks)], h=h, size=3.6)
+            small = int(np.argmin(order))
+            assert surfaces.sampling_side(0, 1, steps) == (small, 1 - small)
+            assert surfaces.sampling_side(0, 1, steps, frozenset({1 - small}))[0] == 1 - small
+            both = surfaces.surface_contacts([(0, 1)], steps, h / 2, 2 * h)
+            one = surfaces.surface_contacts([(0, 1)], steps, h / 2, 2 * h, one_pass=True)
+            mine = both.owner_is_alpha == (small == 0)
+            assert mine.sum() > 5 and (~mine).sum() > 5
+            assert np.all(one.owner_is_alpha == (small == 0))
+            assert np.array_equal(one.point, both.point[mine])
+            assert np.allclose(one.gap, both.gap[mine])
+            assert np.allclose(one.normal, both.normal[mine])
+
+
 @pytest.mark.parametrize("diameter_over_h", [10, 20])
 def test_ring_seeded_disks_meet_at_their_boundaries(diameter_over_h):
     """The least gap of two ring-seeded disks' point-to-surface contacts is the distance

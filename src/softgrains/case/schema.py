@@ -358,6 +358,13 @@ class ContactSettings(_Section):
         "surface", description="where two grains' contacts act: at each grain's outer "
         "points against the other's kernel-smoothed surface (two passes), or at the nodes "
         "they share (the contact of sessions 1-10, which lets loaded grains into each other)")
+    grain_passes: Literal["two", "one"] = Field(
+        "two", description="with grain_sites = \"surface\": \"two\": the outer points of "
+        "both grains of a pair; \"one\": those of one grain only (a ring-seeded grain's "
+        "against another seeding, else the grain with fewer points): half the sites, a "
+        "~1.4x cheaper dense frictional step; the other grain's points then read up to "
+        "~0.09 h inside the first one's surface at 300 sigma0 (its boundary is not a "
+        "constraint; docs/dev-notes.md, session 44)")
     wall_sites: Literal["nodes", "surface", "points"] = Field(
         "points", description="where a grain's contacts with a kinematic rectangle or disk "
         "act: at each of the grain's points within reach against the wall's exact face, the "

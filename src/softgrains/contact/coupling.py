@@ -170,6 +170,7 @@ class CouplingSettings:
     solver: str = "newton"  # contact problem solver: newton | nsgs (solvers.py)
     solver_iterations: int = 50  # per contact solve: Newton iterations or NSGS sweeps
     grain_sites: str = "surface"  # grain–grain contacts at outer points, or at shared nodes
+    grain_passes: str = "two"  # outer points of both grains of a pair, or of one
     wall_sites: str = "points"  # grain–wall contacts at shared nodes, patches or points
     # the farthest a point may move in the step (length; 0: unbounded): each body's
     # iterate is kept within it (motion_bounded_step)
@@ -324,7 +325,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         contacts, points = point_contacts(
             lattice, steps, walls if walls_at_points else {}, contacts,
             spacing, reach if cutoff is None else min(reach, cutoff),
-            settings.grain_sites == "surface")
+            settings.grain_sites == "surface", settings.grain_passes == "one", round_bodies)
         gaps = np.zeros(len(contacts))
     if gap_points is not None and len(contacts):
         X = node_position(lattice, contacts.node)

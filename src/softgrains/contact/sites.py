@@ -316,12 +316,14 @@ def point_blocks(rows: np.ndarray, weights: np.ndarray, rate_rows: np.ndarray,
 
 
 def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: ContactNodes,
-                   spacing: float, reach: float, grains: bool = True
+                   spacing: float, reach: float, grains: bool = True, one_pass: bool = False,
+                   round_bodies: frozenset = frozenset()
                    ) -> tuple[ContactNodes, SurfaceContacts | None]:
     """Split the nodal contacts: those of every pair of deformable grains (``grains``) and of
     every grain and rectangular or round wall in ``walls`` are replaced by point-to-surface
-    contacts at the grains' outer points (surfaces.py). Returns the nodal contacts left (the
-    caller estimates their gaps) and the point contacts (None: there are none)."""
+    contacts at the grains' outer points (surfaces.py; ``one_pass``: one grain's of each
+    pair, ``round_bodies``' first). Returns the nodal contacts left (the caller estimates
+    their gaps) and the point contacts (None: there are none)."""
     grain = np.array([grains and int(a) in steps and int(b) in steps
                       for a, b in zip(contacts.alpha, contacts.beta, strict=True)], bool)
     shapes = {b: shape for b, (_, shape) in walls.items()
@@ -332,7 +334,8 @@ def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: Contact
                                                      contacts.beta[grain], strict=True)})
     wall_pairs = sorted({(int(a), int(b)) for a, b in zip(contacts.alpha[wall],
                                                           contacts.beta[wall], strict=True)})
-    found = ([surface_contacts(pairs, steps, spacing, reach)] if pairs else []) \
+    found = ([surface_contacts(pairs, steps, spacing, reach, one_pass,
+                               frozenset(round_bodies))] if pairs else []) \
         + ([wall_contacts(wall_pairs, steps, shapes, spacing, reach)]
            if wall_pairs else [])
     return subset(contacts, ~(grain | wall)), merge(found) if found else None

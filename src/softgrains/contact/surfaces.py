@@ -11,8 +11,9 @@ distance to it (> 0 outside) is read through the profile of a flat boundary, c =
                                   for lattice points; −(c − ½)/‖∇c‖ errs by 0.4 h at 0.5 h).
 
 A contact is taken at every point p of the outer layer of a grain O (d_O(x_p) > −δ, δ the
-point spacing) that lies within T's kernel reach, for both orders of a pair (two passes);
-against a kinematic wall at every point within reach (``wall_contacts``).
+point spacing) that lies within T's kernel reach, for both orders of a pair (two passes;
+``grain_passes = "one"``: for one order, :func:`sampling_side`); against a kinematic wall
+at every point within reach (``wall_contacts``).
 Its gap is the distance from T's surface to the edge of p's deformed round cell, per unit
 of its rate,
     g_p = (d_T(x_p) − e_p)/λ,   e_p = −n_T·r_p = ½δ‖F_pᵀn_T‖,   r_p = −½δ F_p F_pᵀn_T/‖F_pᵀn_T‖,
@@ -530,15 +531,35 @@ def stack_padded(arrays: list[np.ndarray], width: int, fill) -> np.ndarray:
     return out
 
 
+def sampling_side(a: int, b: int, steps: dict, round_bodies: frozenset = frozenset()
+                  ) -> tuple[int, int]:
+    """(own, other): the order of a pair's one pass (``grain_passes = "one"``): the points
+    of a round (ring-seeded) grain against a body of another seeding, else those of the
+    body with fewer points (the smaller one; α on a tie). A deformable slab's flat row of
+    points against a sliding disk's surface let the disk slide 3% fast (its lowest points
+    alone carry it); the disk's points against the slab's surface slide it at the Coulomb
+    rate (session 44). Fixed by seeding and point count: a pair keeps its order."""
+    def rank(body: int) -> tuple[bool, int]:
+        return body not in round_bodies, steps[body].pts.x.shape[0]
+
+    return (a, b) if rank(a) <= rank(b) else (b, a)
+
+
 def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,
-                     reach: float) -> SurfaceContacts:
+                     reach: float, one_pass: bool = False,
+                     round_bodies: frozenset = frozenset()) -> SurfaceContacts:
     """Both passes for every pair (α, β) of deformable bodies, α < β (evaluated surface by
-    surface, :func:`_passes_against`; listed pair by pair, α's points first)."""
+    surface, :func:`_passes_against`; listed pair by pair, α's points first); with
+    ``one_pass`` only :func:`sampling_side`'s. Both passes put ~4 sites a cell along an
+    interface against ~1 velocity mode of each grain: W is singular, and the redundancy
+    slows the frictional contact solve (docs/dev-notes.md, session 44)."""
     surfaces = {b: KernelSurface(steps[b]) for pair in pairs for b in pair}
+    orders = {(a, b): (sampling_side(a, b, steps, round_bodies),) if one_pass
+              else ((a, b), (b, a)) for a, b in pairs}
     owners: dict[int, list[int]] = {}
-    for a, b in pairs:
-        owners.setdefault(b, []).append(a)
-        owners.setdefault(a, []).append(b)
+    for pair in pairs:
+        for own, other in orders[pair]:
+            owners.setdefault(other, []).append(own)
     found = {}
     for other, own_bodies in owners.items():
         for own, result in zip(own_bodies, _passes_against(other, own_bodies, surfaces,
@@ -546,7 +567,7 @@ def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,
             found[own, other] = result
     parts = []
     for a, b in pairs:
-        for own, other in ((a, b), (b, a)):
+        for own, other in orders[a, b]:
             idx, gap, n_out, own_st, other_st, rate = found[own, other]
             own_alpha = own == a
             # normal from β into α: out of β's surface in the first pass, into α's in the
