@@ -54,18 +54,19 @@ def phi_at_levels(out) -> tuple[float, np.ndarray]:
 @pytest.fixture(scope="module")
 def compacted(tmp_path_factory):
     """run(cell_size, dt, friction, passes) → (summary, (φ0, φ at LEVELS)) of the pair's
-    compaction (``contact.grain_passes``: "two" by default),
+    compaction (``passes``: contact.grain_passes, None: the default),
     each run once per module (the D/h 10 runs at 20 µs serve both tests below)."""
     done = {}
 
-    def run(cell_size: float, dt: float, friction: float, passes: str = "two"):
+    def run(cell_size: float, dt: float, friction: float, passes: str | None = None):
         key = (cell_size, dt, friction, passes)
         if key not in done:
             out = tmp_path_factory.mktemp(f"pair_h{cell_size:g}_dt{dt:g}_mu{friction:g}"
                                           f"_{passes}")
-            case = load_case(EXAMPLES / "compaction_frictionless.toml",
-                             {**pair_of_disks(cell_size, dt, friction),
-                              "contact.grain_passes": passes})
+            overrides = pair_of_disks(cell_size, dt, friction)
+            if passes is not None:
+                overrides["contact.grain_passes"] = passes
+            case = load_case(EXAMPLES / "compaction_frictionless.toml", overrides)
             done[key] = Simulation(case, out=out).run(), phi_at_levels(out)
         return done[key]
 

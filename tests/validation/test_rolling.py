@@ -34,8 +34,9 @@ G, TILT, R = 9.81, np.radians(20.0), 0.5
 TOP = 0.45  # the plane's surface
 
 
-def incline(d_over_h: int, friction: float, plane: str, passes: str = "two") -> dict:
-    """The disk touching the plane (a gap of 0.002 R), gravity tilted by TILT."""
+def incline(d_over_h: int, friction: float, plane: str, passes: str | None = None) -> dict:
+    """The disk touching the plane (a gap of 0.002 R), gravity tilted by TILT (``passes``:
+    contact.grain_passes, None: the default)."""
     h = 2 * R / d_over_h
     slab = {"name": "plane", "shape": "rectangle", "lower": [0.1, TOP - 4 * h],
             "upper": [2.5, TOP], "material": "gel", "kind": "kinematic"}
@@ -47,7 +48,7 @@ def incline(d_over_h: int, friction: float, plane: str, passes: str = "two") -> 
         "bodies": [{"name": "disk", "shape": "disk", "center": [0.7, TOP + 1.002 * R],
                     "radius": R, "material": "gel", "seeding": "rings"}, slab],
         "gravity": {"acceleration": [G * np.sin(TILT), -G * np.cos(TILT)]},
-        "contact": {"friction": friction, "grain_passes": passes},
+        "contact": {"friction": friction, **({"grain_passes": passes} if passes else {})},
     }
     if plane == "slab":  # deformable, its lowest 0.05 m held
         slab.update(kind="deformable", lower=[0.1, TOP - 0.3])
@@ -72,7 +73,7 @@ def _turned(m: np.ndarray, r0: np.ndarray, r: np.ndarray) -> float:
 
 
 def motion(d_over_h: int, friction: float, plane: str = "wall",
-           passes: str = "two") -> tuple[float, float, float]:
+           passes: str | None = None) -> tuple[float, float, float]:
     """The disk's acceleration down the slope and angular acceleration (fitted over the
     last 70% of the run: centre and turning angle of its points, both quadratic in t), and
     the largest |ω| R over the run."""
