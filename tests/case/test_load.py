@@ -94,6 +94,8 @@ def message_of(data: dict, overrides: object = None) -> str:
             "[bodies.0.velocity_gradient] = [[0.0, 0.0], [0.0, 0.0]]: only for kind = 'deformable'",
         ),
         ({"bodies.0.material": None}, "[bodies.0.material]: required key is missing"),
+        ({"contact": {"grain_sites": "nodes", "grain_passes": "one"}},
+         '[contact.grain_passes] = "one": one pass is a choice of the point-to-surface'),
         ({"bodies": []}, "[bodies]: required: give [[bodies]] or a [sample]"),
         ({"bodies": [1]}, "[bodies.0] = 1: must be a table, not an integer"),
         ({"gravity": {"acceleration": [0, float("inf")]}}, "must be a finite number"),

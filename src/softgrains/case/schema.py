@@ -355,16 +355,18 @@ class ContactSettings(_Section):
         "difference", description="contact normal from the mass gradients of both bodies, "
         "or of α or β alone (exact face normals against kinematic rectangles and disks)")
     grain_sites: Literal["surface", "nodes"] = Field(
-        "surface", description="where two grains' contacts act: at each grain's outer "
-        "points against the other's kernel-smoothed surface (two passes), or at the nodes "
-        "they share (the contact of sessions 1-10, which lets loaded grains into each other)")
+        "surface", description="where two grains' contacts act: at the grains' outer "
+        "points against the other's kernel-smoothed surface (see grain_passes), or at the "
+        "nodes they share (the contact of sessions 1-10, which lets loaded grains into each "
+        "other)")
     grain_passes: Literal["two", "one"] = Field(
         "two", description="with grain_sites = \"surface\": \"two\": the outer points of "
         "both grains of a pair; \"one\": those of one grain only (a ring-seeded grain's "
         "against another seeding, else the grain with fewer points): half the sites, a "
-        "~1.4x cheaper dense frictional step; the other grain's points then read up to "
+        "1.4-1.6x cheaper dense frictional step; the other grain's points then read up to "
         "~0.09 h inside the first one's surface at 300 sigma0 (its boundary is not a "
-        "constraint; docs/dev-notes.md, session 44)")
+        "constraint), and on coarse grids (D/h 5) the end-of-step gap corrections can do "
+        "more work than the walls (docs/dev-notes.md, session 44)")
     wall_sites: Literal["nodes", "surface", "points"] = Field(
         "points", description="where a grain's contacts with a kinematic rectangle or disk "
         "act: at each of the grain's points within reach against the wall's exact face, the "
@@ -392,6 +394,15 @@ class ContactSettings(_Section):
     on_failure: Literal["stop", "warn"] = Field(
         "stop", description="when the loop does not converge: stop the run, or warn, flag "
         "the step in series.csv and go on")
+
+    @model_validator(mode="after")
+    def _check_passes(self) -> ContactSettings:
+        if self.grain_passes == "one" and self.grain_sites != "surface":
+            message = ('one pass is a choice of the point-to-surface contact; with '
+                       'grain_sites = "nodes" the grains meet at shared nodes: set '
+                       'grain_sites = "surface" or leave grain_passes out')
+            raise Problems([Problem(("grain_passes",), self.grain_passes, message)])
+        return self
 
 
 class SampleSettings(_Section):
