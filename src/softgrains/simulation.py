@@ -479,6 +479,12 @@ class Simulation:
             log.info("softgrains run: %d bodies, %d points, %d steps of dt = %g s, "
                      "integrator %s", len(self.model.bodies), self.model.n_points,
                      self.n_steps, self.dt, self.model.integrator.kind)
+            if self.case.contact is not None and self.case.contact.grain_passes == "one":
+                log.warning("[contact] grain_passes = \"one\" is experimental: the other "
+                            "grain's points are not held (benchmarks/one_pass_audit.py reads "
+                            "them), and a frictionless six-grain compaction's end-of-step gap "
+                            "corrections did more work than its walls (docs/dev-notes.md, "
+                            "known problems)")
 
         def record(wall):
             row = self.series_row(wall + wall_offset)

@@ -237,3 +237,15 @@ def test_one_pass_contact_slides_the_disk_on_the_slab_at_the_coulomb_rate(monkey
                         rule(a, b, steps, round_bodies)[::-1])
     reversed_a, _, _ = motion(10, friction=mu, plane="slab", passes="one")
     assert abs(reversed_a / sliding - 1.0) > 0.02
+
+
+def test_one_pass_contact_is_logged_as_experimental(tmp_path):
+    """A run with ``contact.grain_passes = "one"`` says in run.log that the option is
+    experimental and where its known problems are written down; the default does not."""
+    for passes, expected in (("one", True), (None, False)):
+        case = incline(10, friction=0.5, plane="slab", passes=passes)
+        case["simulation"]["end_time"] = 0.01
+        out = tmp_path / str(passes)
+        Simulation(load_case(case), out=out).run()
+        assert ('grain_passes = "one" is experimental' in (out / "run.log").read_text()) \
+            == expected

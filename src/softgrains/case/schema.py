@@ -365,8 +365,9 @@ class ContactSettings(_Section):
         "against another seeding, else the grain with fewer points): half the sites, a "
         "1.4-1.6x cheaper dense frictional step; the other grain's points then read up to "
         "~0.09 h inside the first one's surface at 300 sigma0 (its boundary is not a "
-        "constraint), and on coarse grids (D/h 5) the end-of-step gap corrections can do "
-        "more work than the walls (docs/dev-notes.md, session 44)")
+        "constraint), and in a frictionless six-grain compaction (D/h 5 and 10) its "
+        "end-of-step gap corrections did more work than the walls: an experimental "
+        "option (docs/dev-notes.md, session 44)")
     wall_sites: Literal["nodes", "surface", "points"] = Field(
         "points", description="where a grain's contacts with a kinematic rectangle or disk "
         "act: at each of the grain's points within reach against the wall's exact face, the "
