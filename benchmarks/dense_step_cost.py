@@ -19,6 +19,8 @@ import shutil
 import statistics
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from softgrains import Simulation, load_case
@@ -29,15 +31,24 @@ def _variant(text: str) -> tuple[str, list[str]]:
     return label, [o for o in overrides.split(",") if o]
 
 
-def time_steps(run: Path, overrides: list[str], steps: int) -> dict:
-    """Resume ``run`` in a scratch copy and time ``steps`` steps (after one untimed step,
-    which pays any JIT compilation)."""
+@contextmanager
+def resumed(run: Path, overrides: list[str] | None = None) -> Iterator[Simulation]:
+    """A Simulation resumed from ``run``'s checkpoint (with ``overrides`` to its case), in a
+    scratch copy of the run folder (without its snapshots, figures, contacts and grains)
+    that is removed afterwards."""
     with tempfile.TemporaryDirectory() as scratch:
         out = Path(scratch) / "run"
         shutil.copytree(run, out, ignore=shutil.ignore_patterns(
             "snapshots", "figures", "contacts", "grains"))
         sim = Simulation(load_case(out / "case.toml", overrides), out=out)
         sim.resume(out / "checkpoint.h5")
+        yield sim
+
+
+def time_steps(run: Path, overrides: list[str], steps: int) -> dict:
+    """Resume ``run`` in a scratch copy and time ``steps`` steps (after one untimed step,
+    which pays any JIT compilation)."""
+    with resumed(run, overrides) as sim:
         sim.step()
         seconds, iterations, sweeps = [], [], []
         for _ in range(steps):

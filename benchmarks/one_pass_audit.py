@@ -15,14 +15,15 @@ Run:  python benchmarks/one_pass_audit.py RUN [RUN ...]
 from __future__ import annotations
 
 import argparse
-import shutil
-import tempfile
+import sys
 from pathlib import Path
 
 import numpy as np
 
-from softgrains import Simulation, load_case
 from softgrains.contact import sites, surfaces
+
+sys.path.insert(0, str(Path(__file__).parent))
+from dense_step_cost import resumed  # noqa: E402
 
 DEPTHS = (0.0, 0.015, 0.03, 0.05)
 
@@ -44,19 +45,14 @@ def both_sides(run: Path) -> dict:
             seen.update(sc=sc, sampling=sampling)
         return evaluate(pairs, steps, spacing, reach, one_pass, round_bodies)
 
-    with tempfile.TemporaryDirectory() as scratch:
-        out = Path(scratch) / "run"
-        shutil.copytree(run, out, ignore=shutil.ignore_patterns(
-            "snapshots", "figures", "contacts", "grains"))
-        case = load_case(out / "case.toml")
-        sim = Simulation(case, out=out)
-        sim.resume(out / "checkpoint.h5")
+    with resumed(run) as sim:
+        h = sim.case.grid.cell_size
         sites.surface_contacts = spy
         try:
             sim.step()
         finally:
             sites.surface_contacts = evaluate
-    sc, sampling, h = seen["sc"], seen["sampling"], case.grid.cell_size
+    sc, sampling = seen["sc"], seen["sampling"]
     pair = sc.alpha * (int(sc.beta.max()) + 1) + sc.beta
     touching = np.isin(pair, np.unique(pair[sampling & (sc.gap < 0.1 * h)]))
     return {"pairs": np.unique(pair[touching]).size,
