@@ -34,7 +34,7 @@ def both_sides(run: Path) -> dict:
     seen: dict = {}
     evaluate = sites.surface_contacts
 
-    def spy(pairs, steps, spacing, reach, one_pass=False, round_bodies=frozenset()):
+    def spy(pairs, steps, spacing, reach, one_pass=frozenset(), round_bodies=frozenset()):
         if not seen:
             sc = evaluate(pairs, steps, spacing, reach)
             sampling = np.zeros(len(sc), bool)

@@ -12,6 +12,7 @@ is drawn from the seed when the case is loaded), so there is no generator state 
 from __future__ import annotations
 
 import copy
+import math
 import tomllib
 
 import numba
@@ -68,6 +69,7 @@ def snapshot(sim) -> tuple[dict[str, np.ndarray], dict[str, object]]:
         "integrator_dissipation": sim.integrator_dissipation,
         "transfer_dissipation": sim.transfer_dissipation,
         "largest_penetration": sim.largest_penetration,
+        "largest_unsampled_penetration": sim.largest_unsampled_penetration,
         "dt_factor": sim.dt_factor, "steps_at_factor": sim.steps_at_factor,
         "grow_after": sim.grow_after, "just_grown": sim.just_grown,
         "smallest_dt_factor": sim.smallest_dt_factor,
@@ -139,6 +141,8 @@ def restore(sim, arrays: dict[str, np.ndarray], meta: dict[str, object]) -> None
     sim.integrator_dissipation = float(meta.get("integrator_dissipation", 0.0))
     sim.transfer_dissipation = float(meta.get("transfer_dissipation", 0.0))
     sim.largest_penetration = float(meta.get("largest_penetration", 0.0))
+    sim.largest_unsampled_penetration = float(meta.get("largest_unsampled_penetration",
+                                                       math.nan))
     sim.dt_factor = float(meta.get("dt_factor", 1.0))
     sim.steps_at_factor = int(meta.get("steps_at_factor", 0))
     sim.grow_after = int(meta.get("grow_after", sim.grow_after))

@@ -75,7 +75,7 @@ SERIES_COLUMNS = [
     "momentum_x", "momentum_y", "newton_residual", "linear_solver", "contact_sweeps",
     "contact_nodes", "contact_sticking", "contact_sliding", "contact_converged", "wall_time",
     "wall_work", "contact_dissipation", "integrator_dissipation", "transfer_dissipation",
-    "least_contact_gap", "gap_correction_work",
+    "least_contact_gap", "gap_correction_work", "least_unsampled_gap",
 ]
 
 
@@ -111,6 +111,9 @@ class Simulation:
         self.integrator_dissipation = 0.0
         self.transfer_dissipation = 0.0
         self.largest_penetration = 0.0  # −(least gap at an active contact) over the run, m
+        # −(least gap of the outer points one pass leaves out) over the run, m (NaN: no
+        # grain pair took one pass; contact.grain_passes)
+        self.largest_unsampled_penetration = math.nan
         self.resumed_from: int | None = None  # the checkpoint's step when resumed
         self.checkpoint_step: int | None = None  # the step of the last checkpoint written
         self.retried_steps = 0  # steps retried with a halved Δt (retry_halvings)
@@ -166,6 +169,7 @@ class Simulation:
             "transfer_dissipation": self.transfer_dissipation,
             "least_contact_gap": _least_active_gap(dg.contacts),
             "gap_correction_work": self.gap_correction_work,
+            "least_unsampled_gap": dg.contact.least_unsampled_gap,
             **self._protocol_observables(),
         }
 
@@ -261,6 +265,15 @@ class Simulation:
                 self.steps_at_factor, self.just_grown = 0, True
             return dg
 
+    def _frictionless_one_pass(self) -> bool:
+        """True when ``contact.grain_passes = "one"`` meets a frictionless grain pair."""
+        contact, model = self.case.contact, self.model
+        if contact is None or contact.grain_passes != "one" or model.friction is None:
+            return False
+        grains = [b.index for b in model.bodies if b.deformable]
+        mu = model.friction[np.ix_(grains, grains)]
+        return bool((mu[np.triu_indices(len(grains), 1)] == 0.0).any())
+
     def _nominal_dt(self) -> float:
         """The step's Δt before the controller's factor: the protocol's (its phase may set
         its own) or the case's."""
@@ -343,6 +356,8 @@ class Simulation:
         self.transfer_dissipation += sum(r.transfer_dissipation for r in dg.bodies.values())
         self.largest_penetration = max(self.largest_penetration,
                                        -_least_active_gap(dg.contacts, default=0.0))
+        self.largest_unsampled_penetration = float(np.fmax(
+            self.largest_unsampled_penetration, -dg.contact.least_unsampled_gap))
         if self.protocol is not None:
             m, s = self.model, self.state
             grains = m.deformable_points
@@ -479,12 +494,12 @@ class Simulation:
             log.info("softgrains run: %d bodies, %d points, %d steps of dt = %g s, "
                      "integrator %s", len(self.model.bodies), self.model.n_points,
                      self.n_steps, self.dt, self.model.integrator.kind)
-            if self.case.contact is not None and self.case.contact.grain_passes == "one":
-                log.warning("[contact] grain_passes = \"one\" is experimental: the other "
-                            "grain's points are not held (benchmarks/one_pass_audit.py reads "
-                            "them), and a frictionless six-grain compaction's end-of-step gap "
-                            "corrections did more work than its walls (docs/dev-notes.md, "
-                            "known problems)")
+            if self._frictionless_one_pass():
+                log.warning("[contact] grain_passes = \"one\" on frictionless grain pairs is "
+                            "experimental: a loaded grain can spin up, and a frictionless "
+                            "six-grain compaction's end-of-step gap corrections did more work "
+                            "than its walls; \"auto\" (the default) takes two passes there "
+                            "(docs/dev-notes.md, known problems)")
 
         def record(wall):
             row = self.series_row(wall + wall_offset)
@@ -615,6 +630,11 @@ class Simulation:
                 log.info("largest overlap at a contact carrying an impulse: %.3g h (the "
                          "contact's own boundary-gap estimate; series.csv "
                          "least_contact_gap)", self.largest_penetration / self.model.lattice.h)
+                if not math.isnan(self.largest_unsampled_penetration):
+                    log.info("largest overlap of the grains' outer points that one pass "
+                             "leaves out (not contacts; contact.grain_passes): %.3g h "
+                             "(series.csv least_unsampled_gap)",
+                             self.largest_unsampled_penetration / self.model.lattice.h)
             checkpoint(_time.perf_counter() - t0)
         except SimulationError as err:
             status = "failed"
@@ -701,6 +721,8 @@ class Simulation:
             "contact_reach_retries": self.reach_retries,
             "smallest_dt_factor": self.smallest_dt_factor,
             "largest_contact_penetration_h": self.largest_penetration / self.model.lattice.h,
+            "largest_unsampled_penetration_h": _or_none(self.largest_unsampled_penetration
+                                                        / self.model.lattice.h),
             "protocol": self.protocol.summary() if self.protocol is not None else None,
             "software": software_versions(),
         }
@@ -713,6 +735,11 @@ def _halvings_for(ratio: float) -> int:
     """How many halvings of Δt bring a motion ``ratio`` times the limit within it (0 when
     ratio ≤ 1): ⌈log₂ ratio⌉."""
     return max(0, math.ceil(math.log2(ratio))) if ratio > 1.0 else 0
+
+
+def _or_none(value: float) -> float | None:
+    """JSON has no NaN: None where a figure does not exist."""
+    return None if math.isnan(value) else value
 
 
 def _least_active_gap(contacts, default: float = math.nan) -> float:

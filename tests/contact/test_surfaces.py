@@ -229,7 +229,7 @@ def _pair_steps(h: float, seeding: str, separation: float, angle: float, shift):
 
 
 def test_one_pass_takes_the_smaller_grains_points_only():
-    """``grain_passes = "one"``: of two ring disks of radii 0.5 and 0.65 (D/h 10), 0.1 h
+    """One pass (``grain_passes``): of two ring disks of radii 0.5 and 0.65 (D/h 10), 0.1 h
     apart or overlapping by 0.1 h, the contacts are the smaller disk's outer points
     against the larger one's surface, exactly those of the full two passes, whatever the
     pair's order; a ring-seeded body samples first against one of another seeding."""
@@ -246,13 +246,32 @@ def test_one_pass_takes_the_smaller_grains_points_only():
             assert surfaces.sampling_side(0, 1, steps) == (small, 1 - small)
             assert surfaces.sampling_side(0, 1, steps, frozenset({1 - small}))[0] == 1 - small
             both = surfaces.surface_contacts([(0, 1)], steps, h / 2, 2 * h)
-            one = surfaces.surface_contacts([(0, 1)], steps, h / 2, 2 * h, one_pass=True)
+            one = surfaces.surface_contacts([(0, 1)], steps, h / 2, 2 * h,
+                                             one_pass=frozenset({(0, 1)}))
             mine = both.owner_is_alpha == (small == 0)
             assert mine.sum() > 5 and (~mine).sum() > 5
             assert np.all(one.owner_is_alpha == (small == 0))
             assert np.array_equal(one.point, both.point[mine])
             assert np.allclose(one.gap, both.gap[mine])
             assert np.allclose(one.normal, both.normal[mine])
+            # what one pass leaves out: the least gap of the other disk's points, as the
+            # second pass reads them
+            left_out = surfaces.least_unsampled_gap(frozenset({(0, 1)}), steps, h / 2, 2 * h)
+            assert left_out == pytest.approx(both.gap[~mine].min(), abs=1e-12)
+
+
+def test_auto_passes_take_one_pass_on_frictional_pairs_only():
+    """``grain_passes = "auto"`` (the default): one pass for a pair with friction, two for a
+    frictionless one (a loaded grain spins up under one pass without friction:
+    docs/dev-notes.md, session 45); "one" and "two" hold for every pair."""
+    from softgrains.contact.coupling import one_pass_rule
+
+    mu = np.array([[0.0, 0.5, 0.0], [0.5, 0.0, 0.02], [0.0, 0.02, 0.0]])
+    friction = lambda a, b: mu[a, b]  # noqa: E731
+    pairs = [(0, 1), (0, 2), (1, 2)]
+    assert [one_pass_rule("auto", friction)(*p) for p in pairs] == [True, False, True]
+    assert all(one_pass_rule("one", friction)(*p) for p in pairs)
+    assert not any(one_pass_rule("two", friction)(*p) for p in pairs)
 
 
 @pytest.mark.parametrize("diameter_over_h", [10, 20])

@@ -76,14 +76,39 @@ def test_bad_header_and_values_rejected(tmp_path: Path) -> None:
         table.append([object()])
 
 
-def test_resuming_a_table_of_another_version_names_the_columns(tmp_path: Path) -> None:
-    """A series.csv written before a column was added (session 23: gap_correction_work)
-    cannot be appended to: the error names what differs and what to do."""
+def test_resuming_a_table_of_an_older_version_adds_the_new_columns(tmp_path: Path) -> None:
+    """A series.csv written before a column was added (session 45: least_unsampled_gap,
+    between others) is resumed: its rows kept, the new column empty (nan) up to the
+    checkpoint's step, later rows dropped."""
     from softgrains.io import truncate_after_step
 
     path = tmp_path / "series.csv"
-    with CsvTable(path, ["step", "wall_work"]) as table:
-        table.append({"step": 1, "wall_work": 0.5})
-    with pytest.raises(ValueError, match=r"missing: gap_correction_work.*without --resume"):
+    with CsvTable(path, ["step", "wall_work", "phase"]) as table:
+        table.append({"step": 1, "wall_work": 0.5, "phase": "compaction"})
+        table.append({"step": 2, "wall_work": 0.75, "phase": "compaction"})
+    columns = ["step", "wall_work", "least_unsampled_gap", "phase"]
+    assert truncate_after_step(path, columns, 1) == 1
+    with CsvTable(path, columns, append=True) as table:
+        table.append({"step": 2, "wall_work": 0.7, "least_unsampled_gap": -1e-5,
+                      "phase": "compaction"})
+    series = read_table(path)
+    assert list(series) == columns
+    assert np.array_equal(series["wall_work"], [0.5, 0.7])
+    assert np.isnan(series["least_unsampled_gap"][0])
+    assert series["least_unsampled_gap"][1] == -1e-5
+
+
+def test_resuming_a_table_of_another_case_names_the_columns(tmp_path: Path) -> None:
+    """A table whose columns are not an older version's (some not written any more, or in
+    another order) cannot be appended to: the error names what differs and what to do."""
+    from softgrains.io import truncate_after_step
+
+    path = tmp_path / "series.csv"
+    with CsvTable(path, ["step", "wall_work", "other"]) as table:
+        table.append({"step": 1, "wall_work": 0.5, "other": 1.0})
+    with pytest.raises(ValueError, match=r"missing: gap_correction_work.*not written any "
+                       r"more: other.*without --resume"):
         truncate_after_step(path, ["step", "wall_work", "gap_correction_work"], 1)
-    assert truncate_after_step(path, ["step", "wall_work"], 1) == 1  # its one row kept
+    with pytest.raises(ValueError, match="without --resume"):
+        truncate_after_step(path, ["wall_work", "step", "other"], 1)
+    assert truncate_after_step(path, ["step", "wall_work", "other"], 1) == 1  # row kept

@@ -108,18 +108,23 @@ def test_a_pair_of_disks_compacts_the_same_when_dt_is_halved(compacted, friction
 
 @pytest.mark.parametrize("friction", [0.0, 0.5])
 def test_a_pair_of_disks_compacts_the_same_with_one_pass(compacted, friction):
-    """``contact.grain_passes = "one"`` (one disk's points against the other's surface):
-    the pair at D/h 10 and Δt 20 µs compacts as with both passes, φ0 and φ at 2–300 σ0
-    within 1%, and its largest overlap at a loaded contact stays within the issue's
-    0.05 h. Measured (2026-12-06): φ0 the same, φ within 0.03% (μ 0) and 0.05% (μ 0.5),
-    the overlap 0.0012 h and 0.0015 h."""
-    (phi0_two, two), (phi0_one, one) = (compacted(1e-3, 2e-5, friction, passes)[1]
-                                        for passes in ("two", "one"))
-    summary = compacted(1e-3, 2e-5, friction, "one")[0]
+    """One pass (one disk's points against the other's surface; the default
+    ``grain_passes = "auto"`` takes it with friction, "one" forces it without) against two:
+    the pair at D/h 10 and Δt 20 µs compacts the same, φ0 and φ at 2–300 σ0 within 1%, its
+    largest overlap at a loaded contact stays within the issue's 0.05 h, and summary.json
+    reports how far the left-out disk's points went into the other's surface (two passes:
+    none left out). Measured (2026-12-06): φ0 the same, φ within 0.03% (μ 0) and 0.05%
+    (μ 0.5), the overlap 0.0012 h and 0.0015 h."""
+    one, two = ("one", None) if friction == 0.0 else (None, "two")
+    (summary_two, (phi0_two, phi_two)), (summary, (phi0_one, phi_one)) = (
+        compacted(1e-3, 2e-5, friction, passes) for passes in (two, one))
     assert summary["status"] == "completed"
     assert summary["largest_contact_penetration_h"] < 0.05
+    assert summary_two["largest_unsampled_penetration_h"] is None
+    left_out = summary["largest_unsampled_penetration_h"]
+    assert left_out is not None and left_out < 0.05
     assert abs(phi0_one / phi0_two - 1.0) < 0.01
-    assert np.all(np.abs(one / two - 1.0) < 0.01), (two, one)
+    assert np.all(np.abs(phi_one / phi_two - 1.0) < 0.01), (phi_two, phi_one)
     print(f"one pass against two: phi0 {phi0_one / phi0_two - 1:+.4f}, phi "
-          f"{np.abs(one / two - 1.0).max():.4f} at most; penetration "
-          f"{summary['largest_contact_penetration_h']:.4f} h")
+          f"{np.abs(phi_one / phi_two - 1.0).max():.4f} at most; penetration "
+          f"{summary['largest_contact_penetration_h']:.4f} h, left-out points {left_out:.4f} h")

@@ -221,31 +221,34 @@ def test_a_denser_outer_ring_cogs_less():
 
 
 def test_one_pass_contact_slides_the_disk_on_the_slab_at_the_coulomb_rate(monkeypatch):
-    """``contact.grain_passes = "one"`` on the slab (D/h 10, μ 0.05): the disk's points
-    against the slab's surface (the ring-seeded grain samples, surfaces.sampling_side)
-    slide it at the Coulomb rate as both passes do (within 0.5%; measured 0.004%). The other
-    order, the slab's flat row of points against the disk's surface, slides it 3.2% fast
-    (measured): its lowest points alone carry the disk, and the rule is what avoids it."""
+    """The default ``contact.grain_passes = "auto"`` takes one pass on this frictional pair
+    (D/h 10, μ 0.05): the disk's points against the slab's surface (the ring-seeded grain
+    samples, surfaces.sampling_side) slide it at the Coulomb rate as both passes do (within
+    0.5%; measured 0.004%). The other order, the slab's flat row of points against the
+    disk's surface, slides it 3.2% fast (measured): its lowest points alone carry the disk,
+    and the rule is what avoids it (with two passes the order would not matter)."""
     from softgrains.contact import surfaces
 
     mu = 0.05
     sliding = G * (np.sin(TILT) - mu * np.cos(TILT))
-    a, _, _ = motion(10, friction=mu, plane="slab", passes="one")
+    a, _, _ = motion(10, friction=mu, plane="slab")
     assert a == pytest.approx(sliding, rel=0.005)
     rule = surfaces.sampling_side
     monkeypatch.setattr(surfaces, "sampling_side", lambda a, b, steps, round_bodies:
                         rule(a, b, steps, round_bodies)[::-1])
-    reversed_a, _, _ = motion(10, friction=mu, plane="slab", passes="one")
+    reversed_a, _, _ = motion(10, friction=mu, plane="slab")
     assert abs(reversed_a / sliding - 1.0) > 0.02
 
 
-def test_one_pass_contact_is_logged_as_experimental(tmp_path):
-    """A run with ``contact.grain_passes = "one"`` says in run.log that the option is
-    experimental and where its known problems are written down; the default does not."""
-    for passes, expected in (("one", True), (None, False)):
-        case = incline(10, friction=0.5, plane="slab", passes=passes)
+def test_one_pass_on_frictionless_pairs_is_logged_as_experimental(tmp_path):
+    """``contact.grain_passes = "one"`` on a frictionless grain pair says in run.log that
+    this is experimental and where its known problem is written down; on a frictional pair,
+    and with the default ("auto": two passes without friction), it does not."""
+    for passes, friction, expected in (("one", 0.0, True), ("one", 0.5, False),
+                                       (None, 0.0, False)):
+        case = incline(10, friction=friction, plane="slab", passes=passes)
         case["simulation"]["end_time"] = 0.01
-        out = tmp_path / str(passes)
+        out = tmp_path / f"{passes}-{friction}"
         Simulation(load_case(case), out=out).run()
-        assert ('grain_passes = "one" is experimental' in (out / "run.log").read_text()) \
-            == expected
+        assert ('grain_passes = "one" on frictionless grain pairs is experimental'
+                in (out / "run.log").read_text()) == expected

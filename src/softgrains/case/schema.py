@@ -359,15 +359,17 @@ class ContactSettings(_Section):
         "points against the other's kernel-smoothed surface (see grain_passes), or at the "
         "nodes they share (the contact of sessions 1-10, which lets loaded grains into each "
         "other)")
-    grain_passes: Literal["two", "one"] = Field(
-        "two", description="with grain_sites = \"surface\": \"two\": the outer points of "
-        "both grains of a pair; \"one\": those of one grain only (a ring-seeded grain's "
-        "against another seeding, else the grain with fewer points): half the sites, a "
-        "1.4-1.6x cheaper dense frictional step; the other grain's points then read up to "
-        "~0.09 h inside the first one's surface at 300 sigma0 (its boundary is not a "
-        "constraint), and in a frictionless six-grain compaction (D/h 5 and 10) its "
-        "end-of-step gap corrections did more work than the walls: an experimental "
-        "option (docs/dev-notes.md, session 44)")
+    grain_passes: Literal["auto", "two", "one"] = Field(
+        "auto", description="with grain_sites = \"surface\": \"auto\": one pass for a "
+        "pair with friction, two for a frictionless pair; \"two\": the outer points of both "
+        "grains of a pair against the other's surface; \"one\": those of one grain only (a "
+        "ring-seeded grain's against another seeding, else the grain with fewer points): "
+        "half the sites, a 1.6x cheaper dense frictional step, and C9's h halving within 1%; "
+        "the other grain's points are not constraints (summary.json reports how deep they "
+        "go: up to ~0.09 h at 300 sigma0). Without friction one pass lets a loaded grain "
+        "spin up (a frictionless six-grain compaction's end-of-step gap corrections then did "
+        "more work than its walls): \"one\" on frictionless pairs is experimental "
+        "(docs/dev-notes.md, sessions 44-45)")
     wall_sites: Literal["nodes", "surface", "points"] = Field(
         "points", description="where a grain's contacts with a kinematic rectangle or disk "
         "act: at each of the grain's points within reach against the wall's exact face, the "

@@ -170,7 +170,7 @@ class CouplingSettings:
     solver: str = "newton"  # contact problem solver: newton | nsgs (solvers.py)
     solver_iterations: int = 50  # per contact solve: Newton iterations or NSGS sweeps
     grain_sites: str = "surface"  # grain–grain contacts at outer points, or at shared nodes
-    grain_passes: str = "two"  # outer points of both grains of a pair, or of one
+    grain_passes: str = "auto"  # outer points of one grain of a pair or of both (one_pass_rule)
     wall_sites: str = "points"  # grain–wall contacts at shared nodes, patches or points
     # the farthest a point may move in the step (length; 0: unbounded): each body's
     # iterate is kept within it (motion_bounded_step)
@@ -201,6 +201,9 @@ class ContactDiagnostics:
     # times the working set grew: contacts left out that closed, corrected end gaps, a
     # solve redone on every contact
     working_set_growths: int = 0
+    # the least start-of-step gap of the grains' outer points that one pass leaves out
+    # (surfaces.least_unsampled_gap; NaN: no pair took one pass)
+    least_unsampled_gap: float = math.nan
 
 
 @dataclass
@@ -278,6 +281,23 @@ class ContactState:
         return _keys(self.nodes)
 
 
+def one_pass_rule(passes: str, friction: Callable) -> Callable[[int, int], bool]:
+    """Whether a grain pair (α, β) takes one pass (one grain's outer points against the
+    other's surface, surfaces.sampling_side) or two: ``grain_passes`` "one" / "two" for
+    every pair; "auto" one pass where the pair has friction (μ > 0), two where it has none.
+
+    Why "auto": one pass halves the redundant sites of two (a dense frictional step 1.6x
+    cheaper, C9's h halving within 1%), but without friction a loaded grain whose surface
+    is the master spins up (its rotation is resisted only through its kernel surface's
+    first-order rate; the six-disk compaction's grain spun to 0.7 h a step in ten steps
+    with no gap correction yet, then the end-gap corrections put in 8x the walls' work);
+    any stick (μ = 0.02 held it) or its own points as sites (two passes) hold it
+    (docs/dev-notes.md, session 45)."""
+    if passes == "auto":
+        return lambda a, b: float(friction(a, b)) > 0.0
+    return lambda a, b, one=passes == "one": one
+
+
 def _keys(nodes: ContactNodes) -> list[tuple[int, int, int, int]]:
     """(node, α, β, site) per contact: what identifies a contact from one step to the next
     (site: −1 at a node, the point's code or −2 (a patch at a wall) for surface contacts)."""
@@ -318,14 +338,16 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     d = lattice.dim
     gaps = np.zeros(len(contacts))
     stencils, points, reported, point_contact = None, None, None, None
+    unsampled = math.nan
     walls_at_points = settings.wall_sites in ("surface", "points")
     if gap_points is not None and len(contacts) and (settings.grain_sites == "surface"
                                                      or walls_at_points):
         # the pairs taken at points leave the nodal set before its gaps are estimated
-        contacts, points = point_contacts(
+        contacts, points, unsampled = point_contacts(
             lattice, steps, walls if walls_at_points else {}, contacts,
             spacing, reach if cutoff is None else min(reach, cutoff),
-            settings.grain_sites == "surface", settings.grain_passes == "one", round_bodies)
+            settings.grain_sites == "surface", one_pass_rule(settings.grain_passes, friction),
+            round_bodies)
         gaps = np.zeros(len(contacts))
     if gap_points is not None and len(contacts):
         X = node_position(lattice, contacts.node)
@@ -340,7 +362,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     n = len(contacts)
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)
-    diag = ContactDiagnostics(n_contacts=n)
+    diag = ContactDiagnostics(n_contacts=n, least_unsampled_gap=unsampled)
     if n == 0:
         for s in steps.values():
             s.solve()

@@ -24,6 +24,7 @@ from softgrains.contact.patches import aggregate, group
 from softgrains.contact.problem import relative_velocities
 from softgrains.contact.surfaces import (
     SurfaceContacts,
+    least_unsampled_gap,
     merge,
     shape_distance,
     stack_padded,
@@ -316,14 +317,16 @@ def point_blocks(rows: np.ndarray, weights: np.ndarray, rate_rows: np.ndarray,
 
 
 def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: ContactNodes,
-                   spacing: float, reach: float, grains: bool = True, one_pass: bool = False,
+                   spacing: float, reach: float, grains: bool = True,
+                   one_pass: Callable[[int, int], bool] | None = None,
                    round_bodies: frozenset = frozenset()
-                   ) -> tuple[ContactNodes, SurfaceContacts | None]:
+                   ) -> tuple[ContactNodes, SurfaceContacts | None, float]:
     """Split the nodal contacts: those of every pair of deformable grains (``grains``) and of
     every grain and rectangular or round wall in ``walls`` are replaced by point-to-surface
-    contacts at the grains' outer points (surfaces.py; ``one_pass``: one grain's of each
-    pair, ``round_bodies``' first). Returns the nodal contacts left (the caller estimates
-    their gaps) and the point contacts (None: there are none)."""
+    contacts at the grains' outer points (surfaces.py; where ``one_pass(α, β)``, one
+    grain's of the pair, ``round_bodies``' first). Returns the nodal contacts left (the
+    caller estimates their gaps), the point contacts (None: there are none) and the least
+    gap of the points one pass leaves out (surfaces.least_unsampled_gap; NaN: none)."""
     grain = np.array([grains and int(a) in steps and int(b) in steps
                       for a, b in zip(contacts.alpha, contacts.beta, strict=True)], bool)
     shapes = {b: shape for b, (_, shape) in walls.items()
@@ -334,11 +337,14 @@ def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: Contact
                                                      contacts.beta[grain], strict=True)})
     wall_pairs = sorted({(int(a), int(b)) for a, b in zip(contacts.alpha[wall],
                                                           contacts.beta[wall], strict=True)})
-    found = ([surface_contacts(pairs, steps, spacing, reach, one_pass,
+    single = frozenset(p for p in pairs if one_pass is not None and one_pass(*p))
+    found = ([surface_contacts(pairs, steps, spacing, reach, single,
                                frozenset(round_bodies))] if pairs else []) \
         + ([wall_contacts(wall_pairs, steps, shapes, spacing, reach)]
            if wall_pairs else [])
-    return subset(contacts, ~(grain | wall)), merge(found) if found else None
+    unsampled = least_unsampled_gap(single, steps, spacing, reach, frozenset(round_bodies)) \
+        if single else np.nan
+    return subset(contacts, ~(grain | wall)), merge(found) if found else None, unsampled
 
 
 def with_point_contacts(lattice: Lattice, steps: dict, nodal: ContactNodes, gaps: np.ndarray,

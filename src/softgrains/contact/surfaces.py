@@ -12,7 +12,7 @@ distance to it (> 0 outside) is read through the profile of a flat boundary, c =
 
 A contact is taken at every point p of the outer layer of a grain O (d_O(x_p) > −δ, δ the
 point spacing) that lies within T's kernel reach, for both orders of a pair (two passes;
-``grain_passes = "one"``: for one order, :func:`sampling_side`); against a kinematic wall
+``grain_passes``: for one order, :func:`sampling_side`); against a kinematic wall
 at every point within reach (``wall_contacts``).
 Its gap is the distance from T's surface to the edge of p's deformed round cell, per unit
 of its rate,
@@ -399,6 +399,40 @@ def _outer_candidates(own: int, other: int, surfaces: dict, spacing: float,
     return near_box[O.own_distance()[near_box] > -spacing]
 
 
+def _gaps_against(T: KernelSurface, x: np.ndarray, F: np.ndarray, spacing: float) -> tuple:
+    """Points at x (deformation gradients F) against T's surface: T's field c, ‖∇c‖, T's
+    outward normal n_T, the gap g = (d_T(x) − e)/λ (the distance to T's surface less the
+    point's half cell, per unit of its rate n·(v_O − v_T)) and the cell's support r."""
+    c, grad = T.field(x)
+    length = np.linalg.norm(grad, axis=1)
+    distance, lam = calibrated_distance(c, grad, T.radius)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n_out = -grad / length[:, None]
+        gap, support = edge_gap(distance, n_out, F, spacing, True)
+        gap /= lam
+    return c, length, n_out, gap, support
+
+
+def least_unsampled_gap(one_pass: frozenset, steps: dict, spacing: float, reach: float,
+                        round_bodies: frozenset = frozenset()) -> float:
+    """The least gap of the points that one pass leaves out: for each pair in ``one_pass``,
+    the other grain's outer points against the sampling grain's surface (the reverse of
+    :func:`sampling_side`'s order), as a second pass would read them (NaN: no such point
+    within reach). Not a constraint: how far one pass lets the other grain in."""
+    reverse = [sampling_side(a, b, steps, round_bodies)[::-1] for a, b in sorted(one_pass)]
+    surfaces = {b: KernelSurface(steps[b]) for pair in reverse for b in pair}
+    least = np.nan
+    for own, other in reverse:
+        points = _outer_candidates(own, other, surfaces, spacing, reach)
+        pts = steps[own].pts
+        c, length, _, gap, _ = _gaps_against(surfaces[other], pts.x[points], pts.F[points],
+                                             spacing)
+        seen = gap[(c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap)]
+        if seen.size:
+            least = np.fmin(least, seen.min())
+    return float(least)
+
+
 def _passes_against(other: int, owners: list[int], surfaces: dict, spacing: float,
                     reach: float) -> list[tuple]:
     """The outer points of each body in ``owners`` against ``other``'s surface T, in one
@@ -415,15 +449,7 @@ def _passes_against(other: int, owners: list[int], surfaces: dict, spacing: floa
                                                                      strict=True)])
     Fc = np.concatenate([surfaces[own].step.pts.F[c] for own, c in zip(owners, candidates,
                                                                      strict=True)])
-    c, grad = T.field(xc)
-    length = np.linalg.norm(grad, axis=1)
-    distance, lam = calibrated_distance(c, grad, T.radius)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        n_out = -grad / length[:, None]
-        # the distance to T's surface less the point's half cell, per unit of its rate
-        # n·(v_O − v_T): g/λ
-        gap, support = edge_gap(distance, n_out, Fc, spacing, True)
-        gap /= lam
+    c, length, n_out, gap, support = _gaps_against(T, xc, Fc, spacing)
     rows, weights = T.velocity_stencil(xc)
     reached = ((c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap) & (gap < reach)
                & (weights.sum(axis=1) > 0.5))
@@ -533,7 +559,7 @@ def stack_padded(arrays: list[np.ndarray], width: int, fill) -> np.ndarray:
 
 def sampling_side(a: int, b: int, steps: dict, round_bodies: frozenset = frozenset()
                   ) -> tuple[int, int]:
-    """(own, other): the order of a pair's one pass (``grain_passes = "one"``): the points
+    """(own, other): the order of a pair's one pass (``grain_passes``): the points
     of a round (ring-seeded) grain against a body of another seeding, else those of the
     body with fewer points (the smaller one; α on a tie). A deformable slab's flat row of
     points against a sliding disk's surface let the disk slide 3% fast (its lowest points
@@ -546,15 +572,15 @@ def sampling_side(a: int, b: int, steps: dict, round_bodies: frozenset = frozens
 
 
 def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,
-                     reach: float, one_pass: bool = False,
+                     reach: float, one_pass: frozenset = frozenset(),
                      round_bodies: frozenset = frozenset()) -> SurfaceContacts:
     """Both passes for every pair (α, β) of deformable bodies, α < β (evaluated surface by
-    surface, :func:`_passes_against`; listed pair by pair, α's points first); with
-    ``one_pass`` only :func:`sampling_side`'s. Both passes put ~4 sites a cell along an
-    interface against ~1 velocity mode of each grain: W is singular, and the redundancy
-    slows the frictional contact solve (docs/dev-notes.md, session 44)."""
+    surface, :func:`_passes_against`; listed pair by pair, α's points first); for the
+    pairs in ``one_pass`` only :func:`sampling_side`'s. Both passes put ~4 sites a cell
+    along an interface against ~1 velocity mode of each grain: W is singular, and the
+    redundancy slows the frictional contact solve (docs/dev-notes.md, session 44)."""
     surfaces = {b: KernelSurface(steps[b]) for pair in pairs for b in pair}
-    orders = {(a, b): (sampling_side(a, b, steps, round_bodies),) if one_pass
+    orders = {(a, b): (sampling_side(a, b, steps, round_bodies),) if (a, b) in one_pass
               else ((a, b), (b, a)) for a, b in pairs}
     owners: dict[int, list[int]] = {}
     for pair in pairs:

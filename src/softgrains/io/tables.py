@@ -96,7 +96,9 @@ def truncate_after_step(path: str | Path, columns: Sequence[str], step: int) -> 
     rows and an unfinished last line (a run killed while writing): a resumed run appends from
     there without duplicates. The file is replaced atomically. Returns the rows kept.
 
-    Raises ValueError when the header is not ``columns`` (another case wrote the table).
+    A table written by an older version, whose header is ``columns`` less some that were
+    added since, gains them, empty ("nan") in its rows. Raises ValueError when the header is
+    otherwise not ``columns`` (another case wrote the table).
     """
     from softgrains.io.summary import write_bytes_atomic
 
@@ -106,9 +108,12 @@ def truncate_after_step(path: str | Path, columns: Sequence[str], step: int) -> 
         text = text[: text.rfind("\n") + 1]
     lines = text.splitlines(keepends=True)
     header = next(csv.reader(lines[:1]), [])
+    missing = [c for c in columns if c not in header]
+    extra = [c for c in header if c not in columns]
+    if missing and not extra and [c for c in columns if c in header] == header:
+        lines = _with_columns(lines, header, list(columns))
+        header = list(columns)
     if header != list(columns):
-        missing = [c for c in columns if c not in header]
-        extra = [c for c in header if c not in columns]
         raise ValueError(
             f"{path}: its columns are not those of this case"
             + (f" (missing: {', '.join(missing)})" if missing else "")
@@ -123,6 +128,22 @@ def truncate_after_step(path: str | Path, columns: Sequence[str], step: int) -> 
             kept.append(line)
     write_bytes_atomic(path, "".join(kept).encode("utf-8"))
     return len(kept) - 1
+
+
+def _with_columns(lines: list[str], header: list[str], columns: list[str]) -> list[str]:
+    """The table's lines with ``columns`` for header: the cells of ``header``'s columns where
+    they were, "nan" in the others (rows of another length are kept as they are)."""
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(columns)
+    for line in lines[1:]:
+        cells = next(csv.reader([line]), [])
+        if len(cells) == len(header):
+            value = dict(zip(header, cells, strict=True))
+            writer.writerow([value.get(c, "nan") for c in columns])
+        else:
+            out.write(line)
+    return out.getvalue().splitlines(keepends=True)
 
 
 def read_table(path: str | Path) -> dict[str, np.ndarray]:
