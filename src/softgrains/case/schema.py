@@ -364,9 +364,9 @@ class ContactSettings(_Section):
         "pair with friction, two for a frictionless pair; \"two\": the outer points of both "
         "grains of a pair against the other's surface; \"one\": those of one grain only (a "
         "ring-seeded grain's against another seeding, else the grain with fewer points): "
-        "half the sites, a 1.6x cheaper dense frictional step, and C9's h halving within 1%; "
+        "half the sites, a 1.5-1.6x cheaper dense frictional step, and C9's h halving within 1%; "
         "the other grain's points are not constraints (summary.json reports how deep they "
-        "go: up to ~0.09 h at 300 sigma0). Without friction one pass lets a loaded grain "
+        "go: up to ~0.1 h at 300 sigma0). Without friction one pass lets a loaded grain "
         "spin up (a frictionless six-grain compaction's end-of-step gap corrections then did "
         "more work than its walls): \"one\" on frictionless pairs is experimental "
         "(docs/dev-notes.md, sessions 44-45)")

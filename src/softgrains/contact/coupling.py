@@ -286,16 +286,17 @@ def one_pass_rule(passes: str, friction: Callable) -> Callable[[int, int], bool]
     other's surface, surfaces.sampling_side) or two: ``grain_passes`` "one" / "two" for
     every pair; "auto" one pass where the pair has friction (μ > 0), two where it has none.
 
-    Why "auto": one pass halves the redundant sites of two (a dense frictional step 1.6x
-    cheaper, C9's h halving within 1%), but without friction a loaded grain whose surface
-    is the master spins up (its rotation is resisted only through its kernel surface's
-    first-order rate; the six-disk compaction's grain spun to 0.7 h a step in ten steps
-    with no gap correction yet, then the end-gap corrections put in 8x the walls' work);
-    any stick (μ = 0.02 held it) or its own points as sites (two passes) hold it
-    (docs/dev-notes.md, session 45)."""
+    Why "auto": one pass halves the redundant sites of two (a dense frictional step
+    1.5-1.6x cheaper, C9's h halving within 1%), but without friction a loaded round grain
+    whose surface is the master turns freely, and the step's unstable rotation (under the
+    contact loads held over the step) spins it up: in the six-disk compaction its spin
+    grew 1.6-2x a step for ten steps before any end-gap correction, then the corrections
+    put in 8x the walls' work. Any stick (μ = 0.02 held it) or its own points as sites
+    (two passes) hold it (docs/dev-notes.md, session 45, next step 000)."""
     if passes == "auto":
         return lambda a, b: float(friction(a, b)) > 0.0
-    return lambda a, b, one=passes == "one": one
+    every_pair = passes == "one"
+    return lambda a, b: every_pair
 
 
 def _keys(nodes: ContactNodes) -> list[tuple[int, int, int, int]]:
