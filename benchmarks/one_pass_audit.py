@@ -34,7 +34,8 @@ def both_sides(run: Path) -> dict:
     seen: dict = {}
     evaluate = sites.surface_contacts
 
-    def spy(pairs, steps, spacing, reach, one_pass=frozenset(), round_bodies=frozenset()):
+    def spy(pairs, steps, spacing, reach, one_pass=frozenset(), round_bodies=frozenset(),
+            kernel_surfaces=None):
         if not seen:
             sc = evaluate(pairs, steps, spacing, reach)
             sampling = np.zeros(len(sc), bool)
@@ -43,7 +44,7 @@ def both_sides(run: Path) -> dict:
                 sampling |= ((sc.alpha == a) & (sc.beta == b)
                              & (sc.owner_is_alpha == (own == a)))
             seen.update(sc=sc, sampling=sampling)
-        return evaluate(pairs, steps, spacing, reach, one_pass, round_bodies)
+        return evaluate(pairs, steps, spacing, reach, one_pass, round_bodies, kernel_surfaces)
 
     with resumed(run) as sim:
         h = sim.case.grid.cell_size

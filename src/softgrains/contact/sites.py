@@ -338,12 +338,13 @@ def point_contacts(lattice: Lattice, steps: dict, walls: dict, contacts: Contact
     wall_pairs = sorted({(int(a), int(b)) for a, b in zip(contacts.alpha[wall],
                                                           contacts.beta[wall], strict=True)})
     single = frozenset(p for p in pairs if one_pass is not None and one_pass(*p))
+    surfaces: dict = {}  # the grains' KernelSurfaces, shared by the passes and the report
     found = ([surface_contacts(pairs, steps, spacing, reach, single,
-                               frozenset(round_bodies))] if pairs else []) \
+                               frozenset(round_bodies), surfaces)] if pairs else []) \
         + ([wall_contacts(wall_pairs, steps, shapes, spacing, reach)]
            if wall_pairs else [])
-    unsampled = least_unsampled_gap(single, steps, spacing, reach, frozenset(round_bodies)) \
-        if single else np.nan
+    unsampled = least_unsampled_gap(single, steps, spacing, reach, frozenset(round_bodies),
+                                    surfaces) if single else np.nan
     return subset(contacts, ~(grain | wall)), merge(found) if found else None, unsampled
 
 

@@ -414,19 +414,26 @@ def _gaps_against(T: KernelSurface, x: np.ndarray, F: np.ndarray, spacing: float
 
 
 def least_unsampled_gap(one_pass: frozenset, steps: dict, spacing: float, reach: float,
-                        round_bodies: frozenset = frozenset()) -> float:
+                        round_bodies: frozenset = frozenset(),
+                        surfaces: dict | None = None) -> float:
     """The least gap of the points that one pass leaves out: for each pair in ``one_pass``,
     the other grain's outer points against the sampling grain's surface (the reverse of
     :func:`sampling_side`'s order), as a second pass would read them (NaN: no such point
-    within reach). Not a constraint: how far one pass lets the other grain in."""
-    reverse = [sampling_side(a, b, steps, round_bodies)[::-1] for a, b in sorted(one_pass)]
-    surfaces = {b: KernelSurface(steps[b]) for pair in reverse for b in pair}
+    within reach), one field evaluation per sampling surface. Not a constraint: how far
+    one pass lets the other grain in. ``surfaces``: the step's KernelSurfaces, if built."""
+    left_out: dict[int, list[int]] = {}  # sampling grain → the grains it leaves out
+    for a, b in sorted(one_pass):
+        own, other = sampling_side(a, b, steps, round_bodies)
+        left_out.setdefault(own, []).append(other)
+    surfaces = surfaces if surfaces is not None else {}
+    for body in {b for pair in one_pass for b in pair} - set(surfaces):
+        surfaces[body] = KernelSurface(steps[body])
     least = np.nan
-    for own, other in reverse:
-        points = _outer_candidates(own, other, surfaces, spacing, reach)
-        pts = steps[own].pts
-        c, length, _, gap, _ = _gaps_against(surfaces[other], pts.x[points], pts.F[points],
-                                             spacing)
+    for sampling, bodies in left_out.items():
+        candidates = [_outer_candidates(b, sampling, surfaces, spacing, reach) for b in bodies]
+        x = np.concatenate([steps[b].pts.x[c] for b, c in zip(bodies, candidates, strict=True)])
+        F = np.concatenate([steps[b].pts.F[c] for b, c in zip(bodies, candidates, strict=True)])
+        c, length, _, gap, _ = _gaps_against(surfaces[sampling], x, F, spacing)
         seen = gap[(c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap)]
         if seen.size:
             least = np.fmin(least, seen.min())
@@ -573,13 +580,17 @@ def sampling_side(a: int, b: int, steps: dict, round_bodies: frozenset = frozens
 
 def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,
                      reach: float, one_pass: frozenset = frozenset(),
-                     round_bodies: frozenset = frozenset()) -> SurfaceContacts:
+                     round_bodies: frozenset = frozenset(),
+                     surfaces: dict | None = None) -> SurfaceContacts:
     """Both passes for every pair (α, β) of deformable bodies, α < β (evaluated surface by
     surface, :func:`_passes_against`; listed pair by pair, α's points first); for the
     pairs in ``one_pass`` only :func:`sampling_side`'s. Both passes put ~4 sites a cell
     along an interface against ~1 velocity mode of each grain: W is singular, and the
-    redundancy slows the frictional contact solve (docs/dev-notes.md, session 44)."""
-    surfaces = {b: KernelSurface(steps[b]) for pair in pairs for b in pair}
+    redundancy slows the frictional contact solve (docs/dev-notes.md, session 44).
+    ``surfaces``: the step's KernelSurfaces (body → surface), filled in where missing."""
+    surfaces = surfaces if surfaces is not None else {}
+    for body in {b for pair in pairs for b in pair} - set(surfaces):
+        surfaces[body] = KernelSurface(steps[body])
     orders = {(a, b): (sampling_side(a, b, steps, round_bodies),) if (a, b) in one_pass
               else ((a, b), (b, a)) for a, b in pairs}
     owners: dict[int, list[int]] = {}
