@@ -399,6 +399,28 @@ def _outer_candidates(own: int, other: int, surfaces: dict, spacing: float,
     return near_box[O.own_distance()[near_box] > -spacing]
 
 
+def _kernel_surfaces(pairs, steps: dict, surfaces: dict | None) -> dict:
+    """``surfaces`` (body → KernelSurface of the step; a new dict if None) with those of
+    the bodies of ``pairs`` that it lacks built: one per body and step, shared by the
+    passes and the report of :func:`least_unsampled_gap`."""
+    surfaces = surfaces if surfaces is not None else {}
+    for body in {b for pair in pairs for b in pair} - set(surfaces):
+        surfaces[body] = KernelSurface(steps[body])
+    return surfaces
+
+
+def _outer_points(owners: list[int], other: int, surfaces: dict, spacing: float,
+                  reach: float) -> tuple[list[np.ndarray], np.ndarray, np.ndarray]:
+    """The outer points of each body in ``owners`` that may meet ``other``'s surface
+    (:func:`_outer_candidates`): their indices per owner, and their positions and
+    deformation gradients, owner after owner."""
+    candidates = [_outer_candidates(own, other, surfaces, spacing, reach) for own in owners]
+    pts = [surfaces[own].step.pts for own in owners]
+    x = np.concatenate([p.x[c] for p, c in zip(pts, candidates, strict=True)])
+    F = np.concatenate([p.F[c] for p, c in zip(pts, candidates, strict=True)])
+    return candidates, x, F
+
+
 def _gaps_against(T: KernelSurface, x: np.ndarray, F: np.ndarray, spacing: float) -> tuple:
     """Points at x (deformation gradients F) against T's surface: T's field c, ‖∇c‖, T's
     outward normal n_T, the gap g = (d_T(x) − e)/λ (the distance to T's surface less the
@@ -425,14 +447,10 @@ def least_unsampled_gap(one_pass: frozenset, steps: dict, spacing: float, reach:
     for a, b in sorted(one_pass):
         own, other = sampling_side(a, b, steps, round_bodies)
         left_out.setdefault(own, []).append(other)
-    surfaces = surfaces if surfaces is not None else {}
-    for body in {b for pair in one_pass for b in pair} - set(surfaces):
-        surfaces[body] = KernelSurface(steps[body])
+    surfaces = _kernel_surfaces(one_pass, steps, surfaces)
     least = np.nan
     for sampling, bodies in left_out.items():
-        candidates = [_outer_candidates(b, sampling, surfaces, spacing, reach) for b in bodies]
-        x = np.concatenate([steps[b].pts.x[c] for b, c in zip(bodies, candidates, strict=True)])
-        F = np.concatenate([steps[b].pts.F[c] for b, c in zip(bodies, candidates, strict=True)])
+        _, x, F = _outer_points(bodies, sampling, surfaces, spacing, reach)
         c, length, _, gap, _ = _gaps_against(surfaces[sampling], x, F, spacing)
         seen = gap[(c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap)]
         if seen.size:
@@ -450,12 +468,8 @@ def _passes_against(other: int, owners: list[int], surfaces: dict, spacing: floa
     and where T has an active node in its stencil: two grains closing faster than ~1 h a
     step meet one step late."""
     T = surfaces[other]
-    candidates = [_outer_candidates(own, other, surfaces, spacing, reach) for own in owners]
+    candidates, xc, Fc = _outer_points(owners, other, surfaces, spacing, reach)
     sizes = [c.size for c in candidates]
-    xc = np.concatenate([surfaces[own].step.pts.x[c] for own, c in zip(owners, candidates,
-                                                                     strict=True)])
-    Fc = np.concatenate([surfaces[own].step.pts.F[c] for own, c in zip(owners, candidates,
-                                                                     strict=True)])
     c, length, n_out, gap, support = _gaps_against(T, xc, Fc, spacing)
     rows, weights = T.velocity_stencil(xc)
     reached = ((c > FIELD_FLOOR) & (length > 0.0) & np.isfinite(gap) & (gap < reach)
@@ -588,9 +602,7 @@ def surface_contacts(pairs: list[tuple[int, int]], steps: dict, spacing: float,
     along an interface against ~1 velocity mode of each grain: W is singular, and the
     redundancy slows the frictional contact solve (docs/dev-notes.md, session 44).
     ``surfaces``: the step's KernelSurfaces (body → surface), filled in where missing."""
-    surfaces = surfaces if surfaces is not None else {}
-    for body in {b for pair in pairs for b in pair} - set(surfaces):
-        surfaces[body] = KernelSurface(steps[body])
+    surfaces = _kernel_surfaces(pairs, steps, surfaces)
     orders = {(a, b): (sampling_side(a, b, steps, round_bodies),) if (a, b) in one_pass
               else ((a, b), (b, a)) for a, b in pairs}
     owners: dict[int, list[int]] = {}
