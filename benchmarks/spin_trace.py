@@ -12,10 +12,17 @@ seed 3) with the given ``contact.grain_passes`` and friction, and prints the ste
 some grain's rim moves more than ``--spin`` cells a step (and every 10th step). A point
 ω measured from the points after the step's PIC update; L about the grain's mass centre.
 
+The contacts' angular impulse is taken at the sites; since session 46 the surface sides'
+levers (contact/levers.py) add the moment that cancels the error, so ΔL_bulk then shows
+the error the levers cancel. ``--no-levers`` runs without them (as before session 46).
+
 Run:  python benchmarks/spin_trace.py [--passes one] [--friction 0] [--steps 140]
-Measured (session 45, passes "one", μ 0): grain 2 went 1 → 729 rad/s in steps 80–95
-with ΔL_bulk 10–12% below the prediction (7.5e-6 against 8.2e-6 N·s at step 90, 1.26e-4
-against 1.40e-4 at step 95) while the contacts' angular impulse opposed the spin.
+      [--no-levers]
+Measured (session 45, passes "one", μ 0, no levers): grain 2 went 1 → 729 rad/s in steps
+80–95 with ΔL_bulk 10–12% below the prediction (7.5e-6 against 8.2e-6 N·s at step 90,
+1.26e-4 against 1.40e-4 at step 95) while the contacts' angular impulse opposed the spin.
+With the levers (session 46) no grain passes 520 rad/s (a rim at 0.13 h a step, for a
+few steps) and the corrections do no work.
 """
 
 from __future__ import annotations
@@ -26,6 +33,7 @@ import tempfile
 import numpy as np
 
 from softgrains import Simulation, load_case
+from softgrains.contact import coupling
 
 
 def six_disks(passes: str, friction: float) -> dict:
@@ -64,7 +72,10 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=140)
     parser.add_argument("--spin", type=float, default=0.05,
                         help="print steps where a rim moves more than this many cells")
+    parser.add_argument("--no-levers", action="store_true",
+                        help="the surface sides' impulses without their levers")
     args = parser.parse_args()
+    coupling.SURFACE_LEVERS = not args.no_levers
     case = load_case(six_disks(args.passes, args.friction))
     theta = case.simulation.theta
     print("| step | Δt | grain | ω [rad/s] | rim [h/step] | ΔL | contacts' ∫τ | ΔL_bulk "

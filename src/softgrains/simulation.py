@@ -43,7 +43,7 @@ from softgrains.observe.bodies import body_columns, body_records
 from softgrains.observe.chains import chain_lines
 from softgrains.observe.compaction import COMPACTION_COLUMNS
 from softgrains.observe.contacts import CONTACT_COLUMNS, contact_records, contact_rows
-from softgrains.observe.energies import kinetic_energy, strain_energy
+from softgrains.observe.energies import kinetic_energy, spin_energies, strain_energy
 from softgrains.observe.shapes import GRAIN_COLUMNS, grain_rows
 from softgrains.observe.stress import project_per_grain, von_mises
 from softgrains.protocol import UniaxialCompaction
@@ -364,6 +364,11 @@ class Simulation:
             forces = dg.contact_forces(len(m.bodies), m.dim, dt)
             ek = np.zeros(len(m.bodies))
             np.add.at(ek, m.body_id, 0.5 * m.mass * np.einsum("ij,ij->i", s.v, s.v))
+            # a grain whose every contact is frictionless keeps its spin (nothing couples
+            # it to the packing): as a rattler's motion, it is no sign of disequilibrium
+            free = (np.ones(len(m.bodies), bool) if m.friction is None
+                    else ~np.any(m.friction != 0.0, axis=1))
+            ek -= free * spin_energies(m.mass, s.x, s.v, m.body_id, len(m.bodies))
             es = strain_energy(m.law[grains], s.F[grains], m.lam[grains], m.mu[grains],
                                m.vol0[grains])
             self._protocol_row = self.protocol.after_step(s, forces, dg.contacts, ek, es)
@@ -496,10 +501,10 @@ class Simulation:
                      self.n_steps, self.dt, self.model.integrator.kind)
             if self._frictionless_one_pass():
                 log.warning("[contact] grain_passes = \"one\" on frictionless grain pairs is "
-                            "experimental: a loaded grain can spin up, and a frictionless "
-                            "six-grain compaction's end-of-step gap corrections did more work "
-                            "than its walls; \"auto\" (the default) takes two passes there "
-                            "(docs/dev-notes.md, known problems)")
+                            "experimental: it holds loaded grains (the surface sides' "
+                            "levers), but the frictionless example's pre-compaction did not "
+                            "come to rest within its step cap; \"auto\" (the default) takes "
+                            "two passes there (docs/dev-notes.md, #11 next step 000)")
 
         def record(wall):
             row = self.series_row(wall + wall_offset)

@@ -15,7 +15,7 @@ from softgrains.observe.compaction import (
 )
 
 
-def small_compaction(friction=0.0, seeding="rings", **protocol):
+def small_compaction(friction=0.0, seeding="rings", passes=None, **protocol):
     return load_case({
         "simulation": {"dt": 1e-4, "end_time": 0.2, "theta": 1.0, "seed": 3},
         "grid": {"cell_size": 2e-3},
@@ -25,7 +25,7 @@ def small_compaction(friction=0.0, seeding="rings", **protocol):
         "protocol": {"kind": "uniaxial-compaction", "sigma0": 5e3, "wall_speed": 5.0,
                      "precompaction_dt": 5e-4, "precompaction_speed": 0.5,
                      "stop_stress_ratio": 30.0, **protocol},
-        "contact": {"friction": friction},
+        "contact": {"friction": friction, **({"grain_passes": passes} if passes else {})},
         "output": {"interval": 1, "snapshot_interval": 0, "progress": False},
     })
 
@@ -192,23 +192,39 @@ def test_loaded_contacts_stay_within_the_bar_over_the_whole_run(run):
     assert 0.0 <= series["gap_correction_work"][-1] < 0.02 * series["wall_work"][-1]
 
 
-def test_an_overlap_beyond_the_gap_limit_does_not_creep(tmp_path, monkeypatch):
+def test_an_overlap_beyond_the_gap_limit_does_not_creep(tmp_path):
     """The end-of-step gap check lets an overlap deepen by up to GAP_ERROR h a step without
     a re-solve, and an error of one sign does so step after step (session 24: a grain
     point sliding along the flattened surface of a loaded contact, −0.0016 h a step for 50
     steps in the frictionless main job, to 0.051 h). Beyond GAP_LIMIT h an overlap may not
-    deepen at all. Shown on the small compaction with the limit moved to 0.03 h, below
-    where its overlaps creep to: measured 0.030 h (0.037 h with the default 0.04 h, whose
-    limit it does not reach; 0.026 h with 0.02 h)."""
+    deepen at all. Shown on the small compaction with the default limit (0.04 h), below
+    where its overlaps creep to: measured 0.0400 h, 0.0454 h with no limit (session 46,
+    with the surface levers; before them 0.0257 h with or without it, and 0.030 h at a
+    limit of 0.03 h). Known leak: with the limit at 0.03 h the overlap passes it by
+    0.0022 h, ≤ 0.0004 h a step for 7 steps (a corrected end gap is accepted GAP_SETTLE h
+    below its floor; 0.0002 h with GAP_SETTLE = 0.0001 h; docs/dev-notes.md)."""
     from softgrains.contact import coupling
 
-    monkeypatch.setattr(coupling, "GAP_LIMIT", 0.03)
     # lattice-seeded grains: their corners make the overlaps that creep (round grains stay
     # within 0.019 h here)
     case = small_compaction(wall_speed=0.5, seeding="lattice")
     summary = Simulation(case, out=tmp_path).run()
     assert summary["status"] == "completed"
-    assert summary["largest_contact_penetration_h"] < 0.03 + 2 * coupling.GAP_SETTLE
+    assert summary["largest_contact_penetration_h"] < coupling.GAP_LIMIT + 2 * coupling.GAP_SETTLE
+
+
+def test_frictionless_grains_taken_in_one_pass_do_not_spin_up(tmp_path):
+    """One pass without friction: a loaded round grain whose kernel surface meets the
+    other grain's points is held from turning by nothing but its contacts' levers
+    (contact/levers.py). Without them the θ-step's angular-momentum error spun the large
+    grain up ×1.6–2 a step (2 → 729 rad/s in steps 86–95), its surface inflated and the
+    end-gap corrections poured energy in: measured (session 46) 10 retried steps and
+    correction work 8.4× the walls' work; with them 1 retried step and none."""
+    summary = Simulation(small_compaction(wall_speed=0.5, passes="one"), out=tmp_path).run()
+    series = read_table(tmp_path / "series.csv")
+    assert summary["status"] == "completed"
+    assert summary["retried_steps"] <= 2
+    assert series["gap_correction_work"][-1] < 0.01 * series["wall_work"][-1]
 
 
 def test_a_sample_prepared_without_friction_gets_its_friction_at_sigma0(tmp_path):

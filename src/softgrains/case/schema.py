@@ -366,10 +366,10 @@ class ContactSettings(_Section):
         "ring-seeded grain's against another seeding, else the grain with fewer points): "
         "half the sites, a 1.5-1.6x cheaper dense frictional step, and C9's h halving within 1%; "
         "the other grain's points are not constraints (summary.json reports how deep they "
-        "go: up to ~0.1 h at 300 sigma0). Without friction one pass lets a loaded grain "
-        "spin up (a frictionless six-grain compaction's end-of-step gap corrections then did "
-        "more work than its walls): \"one\" on frictionless pairs is experimental "
-        "(docs/dev-notes.md, sessions 44-45)")
+        "go: up to ~0.1 h at 300 sigma0). Without friction one pass holds loaded grains "
+        "(the surface sides' levers, since 2026-12-06) but is not cheaper: the frictionless "
+        "example's pre-compaction did not come to rest within its step cap; \"one\" on "
+        "frictionless pairs is experimental (docs/dev-notes.md, #11 next step 000)")
     wall_sites: Literal["nodes", "surface", "points"] = Field(
         "points", description="where a grain's contacts with a kinematic rectangle or disk "
         "act: at each of the grain's points within reach against the wall's exact face, the "

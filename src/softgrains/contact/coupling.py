@@ -63,6 +63,7 @@ from softgrains.contact.gap import (
     near_points,
     oriented_normals,
 )
+from softgrains.contact.levers import Levers, surface_sides
 from softgrains.contact.local_law import SLIP, STICK
 from softgrains.contact.problem import (
     ContactProblem,
@@ -150,6 +151,9 @@ WORKING_SET_GAP = 0.1
 # floor (the fixed point's residual, a few % of the correction).
 GAP_OVERLAP, GAP_ERROR, GAP_UPDATES = 0.025, 0.002, 3
 GAP_LIMIT, GAP_SETTLE = 0.04, 0.0005
+# the surface side of a grain pair's point contact takes its impulses' moment at its
+# material's lever (levers.py; off only to measure what it does)
+SURFACE_LEVERS = True
 
 
 @dataclass(frozen=True)
@@ -363,6 +367,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     n = len(contacts)
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)
+    # the surface sides of grain pairs take their impulses' moment at the material's lever
+    sides = (surface_sides(points, point_contact, steps)
+             if points is not None and SURFACE_LEVERS else None)
+    levers = Levers(sides, steps) if sides is not None else None
     diag = ContactDiagnostics(n_contacts=n, least_unsampled_gap=unsampled)
     if n == 0:
         for s in steps.values():
@@ -422,6 +430,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         for slot, body in enumerate(everywhere.bodies):
             steps[body].add_impulses(everywhere.rows[slot],
                                      everywhere.to_rows(slot, Q[everywhere.span(slot)]))
+        if levers is not None:
+            levers.apply(P)
 
     delassus = settings.relation == "delassus"
     options = ContactSolverOptions(method=settings.solver,
@@ -542,6 +552,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                                    step))
         P[ws] = result.impulse
         status[ws] = result.status
+        if levers is not None:
+            levers.apply(P)
         diag.iterations = k
         # the complementarity error at the velocities the bodies now have (the predicted
         # ones unless the line search shortened a step or the relation is lumped); a
@@ -668,7 +680,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             raise SimulationError(diag.message, kind="contact", step=step,
                                   body=name_a, other=name_b, contact_problem=problem)
     diag.wall_work, diag.dissipation = _contact_work(steps, slots, P[ws], wall_va[ws],
-                                                     wall_vb[ws], dt)
+                                                     wall_vb[ws], dt,
+                                                     levers.work() if levers else 0.0)
     diag.working_set = int(member.sum())
     diag.correction_work = -float(np.einsum("ci,ci->c", P, contacts.normal)
                                   @ end_gap_offset) / dt
@@ -842,18 +855,20 @@ def _predicted_velocity(step, rows: np.ndarray, du: np.ndarray | None) -> np.nda
 
 
 def _contact_work(steps: dict, slots: Slots, P: np.ndarray, wall_va: np.ndarray,
-                  wall_vb: np.ndarray, dt: float) -> tuple[float, float]:
-    """The step's wall work and contact dissipation from the contact forces P/Δt and the
-    displacements u of the step (the bodies' at their contact rows, Δt v for a wall):
+                  wall_vb: np.ndarray, dt: float, lever_work: float
+                  ) -> tuple[float, float]:
+    """The step's wall work and contact dissipation from the contact forces P/Δt, the
+    levers' impulses g_b (levers.py; ``lever_work`` = Σ_b g_b·u_b) and the displacements
+    u of the step (the bodies' at their contact rows, Δt v for a wall):
         W_wall = Σ_{β wall} P·u_β/Δt − Σ_{α wall} P·u_α/Δt,
-        D = −Σ_c P·(u_α − u_β)/Δt,
+        D = −Σ_c P·(u_α − u_β)/Δt − Σ_b g_b·u_b/Δt,
     so that the deformable bodies receive W_wall − D from the contacts. (D > 0: energy
     taken out, e.g. by friction; D < 0: put in, e.g. by overlap removal.)"""
     U = slots.stack(lambda body, rows: steps[body].u[rows])
     relative = slots.relative_velocities(U, wall_va * dt, wall_vb * dt)
     wall_b, wall_a = slots.b_slot < 0, slots.a_slot < 0
     work = float(np.sum(P[wall_b] * wall_vb[wall_b]) - np.sum(P[wall_a] * wall_va[wall_a]))
-    return work, -float(np.sum(P * relative)) / dt
+    return work, -(float(np.sum(P * relative)) + lever_work) / dt
 
 
 def _velocity_weight(settings) -> float:

@@ -101,8 +101,9 @@ class UniaxialCompaction:
     def after_step(self, state, forces: np.ndarray, contacts, kinetic: np.ndarray,
                    strain: float) -> dict[str, object]:
         """Observables of the step just taken; advances the phase. ``forces`` (B, d);
-        ``kinetic``: kinetic energy per body (rattlers do not count for equilibrium: a
-        free grain keeps its velocity)."""
+        ``kinetic``: kinetic energy per body, less the spin of a grain whose contacts are
+        all frictionless (rattlers do not count for equilibrium: a free grain keeps its
+        velocity, a frictionless round grain its spin)."""
         s = self.settings
         phase = self.phase
         obs, rattlers = self._observe(state, forces, contacts)
