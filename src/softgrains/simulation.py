@@ -362,17 +362,22 @@ class Simulation:
             m, s = self.model, self.state
             grains = m.deformable_points
             forces = dg.contact_forces(len(m.bodies), m.dim, dt)
-            ek = np.zeros(len(m.bodies))
-            np.add.at(ek, m.body_id, 0.5 * m.mass * np.einsum("ij,ij->i", s.v, s.v))
-            # a grain whose every contact is frictionless keeps its spin (nothing couples
-            # it to the packing): as a rattler's motion, it is no sign of disequilibrium
-            free = (np.ones(len(m.bodies), bool) if m.friction is None
-                    else ~np.any(m.friction != 0.0, axis=1))
-            ek -= free * spin_energies(m.mass, s.x, s.v, m.body_id, len(m.bodies))
+            ek = self.unsettled_kinetic_energy()
             es = strain_energy(m.law[grains], s.F[grains], m.lam[grains], m.mu[grains],
                                m.vol0[grains])
             self._protocol_row = self.protocol.after_step(s, forces, dg.contacts, ek, es)
         return dg
+
+    def unsettled_kinetic_energy(self) -> np.ndarray:
+        """Per body its kinetic energy, less the spin (observe.energies.spin_energies) of a
+        body whose every contact is frictionless: nothing couples that spin to the packing,
+        so, as a rattler's motion, it is no sign that the packing has not settled."""
+        m, s = self.model, self.state
+        ek = np.zeros(len(m.bodies))
+        np.add.at(ek, m.body_id, 0.5 * m.mass * np.einsum("ij,ij->i", s.v, s.v))
+        free = (np.ones(len(m.bodies), bool) if m.friction is None
+                else ~np.any(m.friction != 0.0, axis=1))
+        return ek - free * spin_energies(m.mass, s.x, s.v, m.body_id, len(m.bodies))
 
     def _adaptive_reach(self) -> bool:
         """Whether this step may look for its point contacts short of the full reach
