@@ -84,27 +84,48 @@ def moment(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.cross(a, b)
 
 
-def lever_moments(sides: SurfaceSides, steps: dict, P: np.ndarray) -> dict:
+def _site_map(sides: SurfaceSides, steps: dict) -> tuple:
+    """The bodies of ``sides`` (all their iterates stacked in this order), both sides'
+    stencil rows into that stack (−1: none), and each site's surface grain as an index
+    into the distinct surface grains (returned too)."""
+    bodies = np.unique(np.r_[sides.surface, sides.owner])
+    sizes = np.array([steps[int(b)].u.shape[0] for b in bodies])
+    offset = np.r_[0, np.cumsum(sizes)[:-1]]
+    at = np.searchsorted(bodies, sides.owner)
+    owner_rows = np.where(sides.owner_rows >= 0, sides.owner_rows + offset[at][:, None], -1)
+    at = np.searchsorted(bodies, sides.surface)
+    surface_rows = np.where(sides.surface_rows >= 0,
+                            sides.surface_rows + offset[at][:, None], -1)
+    surfaces, which = np.unique(sides.surface, return_inverse=True)
+    return bodies, owner_rows, surface_rows, surfaces, which
+
+
+def lever_moments(sides: SurfaceSides, steps: dict, P: np.ndarray,
+                  site_map: tuple | None = None) -> dict:
     """Per surface grain the moment Σ δ × P_surface of its sites' impulses ``P`` (on α,
     per contact) moved by the step's relative displacement δ = u_owner − u_surface at
-    each site, the bodies' displacements their current iterates."""
-    d = P.shape[1]
-    delta = np.zeros((len(sides), d))
-    for body in np.unique(np.r_[sides.surface, sides.owner]):
-        u = steps[int(body)].u
-        mine = sides.owner == body
-        delta[mine] += _at_sites(u, sides.owner_rows[mine], sides.owner_weights[mine])
-        mine = sides.surface == body
-        delta[mine] -= _at_sites(u, sides.surface_rows[mine], sides.surface_weights[mine])
+    each site, the bodies' displacements their current iterates (``site_map``:
+    :func:`_site_map`'s, if built)."""
+    bodies, owner_rows, surface_rows, surfaces, which = (
+        site_map if site_map is not None else _site_map(sides, steps))
+    u = np.concatenate([steps[int(b)].u for b in bodies])
+    delta = (_at_sites(u, owner_rows, sides.owner_weights)
+             - _at_sites(u, surface_rows, sides.surface_weights))
     moments = moment(delta, sides.sign[:, None] * P[sides.contact])
-    return {int(body): moments[sides.surface == body].sum(axis=0)
-            for body in np.unique(sides.surface)}
+    if moments.ndim == 1:
+        total = np.bincount(which, moments, minlength=surfaces.size)
+    else:
+        total = np.stack([np.bincount(which, moments[:, k], minlength=surfaces.size)
+                          for k in range(moments.shape[1])], axis=1)
+    return dict(zip(surfaces.tolist(), total, strict=True))
 
 
 def rotation_basis(step) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(m_I, r_I, J⁻¹): the active nodes' lumped masses, positions about their mass centre
     and the inverse of their polar (2D, 1 × 1) or inertia (3D) moment."""
-    positions = step.stepper.lattice.node_positions(step.box)[step.active]
+    lattice, box = step.stepper.lattice, step.box
+    local = np.stack(np.unravel_index(step.active, tuple(box.shape), order="F"), axis=1)
+    positions = lattice.node_origin + lattice.h * (box.lower + local)
     m = step.m[:, 0]
     r = positions - (m[:, None] * positions).sum(axis=0) / m.sum()
     polar = float((m * (r * r).sum(axis=1)).sum())
@@ -133,19 +154,21 @@ class Levers:
         self.sides, self.steps = sides, steps
         self.applied: dict[int, np.ndarray] = {}
         self._bases: dict[int, tuple] = {}
+        self._site_map = _site_map(sides, steps)
 
     def apply(self, P: np.ndarray) -> None:
         """Bring each surface grain's lever impulses to the moments of the impulses P at
         the bodies' current iterates. A body held by Dirichlet rows gets none (its supports
         take the moment)."""
-        for body, torque in lever_moments(self.sides, self.steps, P).items():
+        for body, torque in lever_moments(self.sides, self.steps, P,
+                                          self._site_map).items():
             step = self.steps[body]
             if step.fixed.any():
                 continue
             if body not in self._bases:
                 self._bases[body] = rotation_basis(step)
             g = rotation_impulses(self._bases[body], torque)
-            step.add_impulses(np.arange(g.shape[0]), g - self.applied.get(body, 0.0))
+            step.add_impulses(slice(None), g - self.applied.get(body, 0.0))
             self.applied[body] = g
 
     def work(self) -> float:

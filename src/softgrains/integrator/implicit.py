@@ -651,10 +651,10 @@ class BodyStep:
         if self.jmin <= 0.0 and self.use_projected_tangent():
             self.u, self.r, self.rnorm, self.jmin, self.pi = before
 
-    def add_impulses(self, rows: np.ndarray, Q: np.ndarray) -> None:
-        """Add impulse changes Q (k, d) at distinct active ``rows`` to b (−P in R for θ,
-        −P/(γΔt) for Newmark); R and Π are affine in b, so they follow without a new
-        evaluation of the internal force."""
+    def add_impulses(self, rows: np.ndarray | slice, Q: np.ndarray) -> None:
+        """Add impulse changes Q (k, d) at distinct active ``rows`` (a slice: all) to b
+        (−P in R for θ, −P/(γΔt) for Newmark); R and Π are affine in b, so they follow
+        without a new evaluation of the internal force."""
         w = self.impulse_weight
         self.b[rows] += w * Q
         self.contact_impulse[rows] += Q
