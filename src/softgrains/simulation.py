@@ -507,9 +507,10 @@ class Simulation:
             if self._frictionless_one_pass():
                 log.warning("[contact] grain_passes = \"one\" on frictionless grain pairs is "
                             "experimental: it holds loaded grains (the surface sides' "
-                            "levers), but the frictionless example's pre-compaction did not "
-                            "come to rest within its step cap; \"auto\" (the default) takes "
-                            "two passes there (docs/dev-notes.md, #11 next step 000)")
+                            "levers), but on the frictionless example its loaded contacts "
+                            "reach the gap limit (0.040 h against 0.017-0.019 h with two "
+                            "passes); \"auto\" (the default) takes two passes there "
+                            "(docs/dev-notes.md, #11 next step 000)")
 
         def record(wall):
             row = self.series_row(wall + wall_offset)

@@ -192,25 +192,25 @@ def test_loaded_contacts_stay_within_the_bar_over_the_whole_run(run):
     assert 0.0 <= series["gap_correction_work"][-1] < 0.02 * series["wall_work"][-1]
 
 
-def test_an_overlap_beyond_the_gap_limit_does_not_creep(tmp_path):
+def test_an_overlap_beyond_the_gap_limit_does_not_creep(tmp_path, monkeypatch):
     """The end-of-step gap check lets an overlap deepen by up to GAP_ERROR h a step without
     a re-solve, and an error of one sign does so step after step (session 24: a grain
     point sliding along the flattened surface of a loaded contact, −0.0016 h a step for 50
     steps in the frictionless main job, to 0.051 h). Beyond GAP_LIMIT h an overlap may not
-    deepen at all. Shown on the small compaction with the default limit (0.04 h), below
-    where its overlaps creep to: measured 0.0400 h, 0.0454 h with no limit (session 46,
-    with the surface levers; before them 0.0257 h with or without it, and 0.030 h at a
-    limit of 0.03 h). Known leak: with the limit at 0.03 h the overlap passes it by
-    0.0022 h, ≤ 0.0004 h a step for 7 steps (a corrected end gap is accepted GAP_SETTLE h
-    below its floor; 0.0002 h with GAP_SETTLE = 0.0001 h; docs/dev-notes.md)."""
+    deepen at all. Shown on the small compaction with the limit moved to 0.03 h: measured
+    0.030 h when written (0.037 h with the default 0.04 h). Weak since then: the same case
+    now stays at 0.0257 h whatever the limit (session 46), and with the limit at 0.02 h
+    the reported overlap (the contacts' own estimate, not the true end gap the limit
+    holds) passes it by 0.005 h (docs/dev-notes.md, known problems)."""
     from softgrains.contact import coupling
 
+    monkeypatch.setattr(coupling, "GAP_LIMIT", 0.03)
     # lattice-seeded grains: their corners make the overlaps that creep (round grains stay
     # within 0.019 h here)
     case = small_compaction(wall_speed=0.5, seeding="lattice")
     summary = Simulation(case, out=tmp_path).run()
     assert summary["status"] == "completed"
-    assert summary["largest_contact_penetration_h"] < coupling.GAP_LIMIT + 2 * coupling.GAP_SETTLE
+    assert summary["largest_contact_penetration_h"] < 0.03 + 2 * coupling.GAP_SETTLE
 
 
 def test_frictionless_grains_taken_in_one_pass_do_not_spin_up(tmp_path):

@@ -367,9 +367,10 @@ class ContactSettings(_Section):
         "half the sites, a 1.5-1.6x cheaper dense frictional step, and C9's h halving within 1%; "
         "the other grain's points are not constraints (summary.json reports how deep they "
         "go: up to ~0.1 h at 300 sigma0). Without friction one pass holds loaded grains "
-        "(the surface sides' levers, since 2026-12-06) but is not cheaper: the frictionless "
-        "example's pre-compaction did not come to rest within its step cap; \"one\" on "
-        "frictionless pairs is experimental (docs/dev-notes.md, #11 next step 000)")
+        "(the surface sides' levers, since 2026-12-06), but on the frictionless example its "
+        "loaded contacts reach the gap limit (0.040 h against 0.017-0.019 h with two "
+        "passes): \"one\" on frictionless pairs is experimental (docs/dev-notes.md, #11 "
+        "next step 000)")
     wall_sites: Literal["nodes", "surface", "points"] = Field(
         "points", description="where a grain's contacts with a kinematic rectangle or disk "
         "act: at each of the grain's points within reach against the wall's exact face, the "

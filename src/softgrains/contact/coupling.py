@@ -291,12 +291,11 @@ def one_pass_rule(passes: str, friction: Callable) -> Callable[[int, int], bool]
     every pair; "auto" one pass where the pair has friction (μ > 0), two where it has none.
 
     Why "auto": one pass halves the redundant sites of two (a dense frictional step
-    1.5-1.6x cheaper, C9's h halving within 1%), but without friction a loaded round grain
-    whose surface is the master turns freely, and the step's unstable rotation (under the
-    contact loads held over the step) spins it up: in the six-disk compaction its spin
-    grew 1.6-2x a step for ten steps before any end-gap correction, then the corrections
-    put in 8x the walls' work. Any stick (μ = 0.02 held it) or its own points as sites
-    (two passes) hold it (docs/dev-notes.md, session 45, next step 000)."""
+    1.5-2.5x cheaper). Without friction a loaded round grain whose surface is the master
+    spun up until the surface sides' levers (levers.py, session 46) held it; with them
+    frictionless one pass holds, but its loaded contacts reach the gap limit (0.040 h
+    against 0.017-0.019 h with two passes on the frictionless example) and its cost is
+    not measured yet (docs/dev-notes.md, next step 000)."""
     if passes == "auto":
         return lambda a, b: float(friction(a, b)) > 0.0
     every_pair = passes == "one"
@@ -345,14 +344,14 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     stencils, points, reported, point_contact = None, None, None, None
     unsampled = math.nan
     walls_at_points = settings.wall_sites in ("surface", "points")
+    one_pass = one_pass_rule(settings.grain_passes, friction)
     if gap_points is not None and len(contacts) and (settings.grain_sites == "surface"
                                                      or walls_at_points):
         # the pairs taken at points leave the nodal set before its gaps are estimated
         contacts, points, unsampled = point_contacts(
             lattice, steps, walls if walls_at_points else {}, contacts,
             spacing, reach if cutoff is None else min(reach, cutoff),
-            settings.grain_sites == "surface", one_pass_rule(settings.grain_passes, friction),
-            round_bodies)
+            settings.grain_sites == "surface", one_pass, round_bodies)
         gaps = np.zeros(len(contacts))
     if gap_points is not None and len(contacts):
         X = node_position(lattice, contacts.node)
@@ -368,7 +367,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     P = np.zeros((n, d))
     status = np.zeros(n, dtype=np.int64)
     # the surface sides of grain pairs take their impulses' moment at the material's lever
-    sides = (surface_sides(points, point_contact, steps)
+    sides = (surface_sides(points, point_contact, steps, one_pass)
              if points is not None and SURFACE_LEVERS else None)
     levers = Levers(sides, steps) if sides is not None else None
     diag = ContactDiagnostics(n_contacts=n, least_unsampled_gap=unsampled)
