@@ -508,7 +508,7 @@ class Simulation:
                 log.warning("[contact] grain_passes = \"one\" on frictionless grain pairs is "
                             "experimental: it holds loaded grains (the surface sides' "
                             "levers), but on the frictionless example its loaded contacts "
-                            "reach the gap limit (0.040 h against 0.017-0.019 h with two "
+                            "reach the gap limit (0.040 h against 0.027 h with two "
                             "passes); \"auto\" (the default) takes two passes there "
                             "(docs/dev-notes.md, #11 next step 000)")
 

@@ -368,7 +368,7 @@ class ContactSettings(_Section):
         "the other grain's points are not constraints (summary.json reports how deep they "
         "go: up to ~0.1 h at 300 sigma0). Without friction one pass holds loaded grains "
         "(the surface sides' levers, since 2026-12-06), but on the frictionless example its "
-        "loaded contacts reach the gap limit (0.040 h against 0.017-0.019 h with two "
+        "loaded contacts reach the gap limit (0.040 h against 0.027 h with two "
         "passes): \"one\" on frictionless pairs is experimental (docs/dev-notes.md, #11 "
         "next step 000)")
     wall_sites: Literal["nodes", "surface", "points"] = Field(

@@ -294,8 +294,8 @@ def one_pass_rule(passes: str, friction: Callable) -> Callable[[int, int], bool]
     1.5-2.5x cheaper). Without friction a loaded round grain whose surface is the master
     spun up until the surface sides' levers (levers.py, session 46) held it; with them
     frictionless one pass holds, but its loaded contacts reach the gap limit (0.040 h
-    against 0.017-0.019 h with two passes on the frictionless example) and its cost is
-    not measured yet (docs/dev-notes.md, next step 000)."""
+    against 0.027 h with two passes on the frictionless example) and the loop takes more
+    iterations (186 against 113 s there; docs/dev-notes.md, next step 000)."""
     if passes == "auto":
         return lambda a, b: float(friction(a, b)) > 0.0
     every_pair = passes == "one"
