@@ -34,6 +34,7 @@ import numpy as np
 
 from softgrains import Simulation, load_case
 from softgrains.contact import coupling
+from softgrains.contact.levers import moment
 
 
 def six_disks(passes: str, friction: float) -> dict:
@@ -52,16 +53,12 @@ def six_disks(passes: str, friction: float) -> dict:
     }
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-
-
 def _spin(sim, body) -> tuple[float, np.ndarray, float, float]:
     """(L, mass centre, polar moment, largest radius) of a grain's points."""
     m, x, v = sim.model.mass[body.points], sim.state.x[body.points], sim.state.v[body.points]
     c = (m[:, None] * x).sum(0) / m.sum()
     r, w = x - c, v - (m[:, None] * v).sum(0) / m.sum()
-    return (float((m * _cross(r, w)).sum()), c, float((m * (r * r).sum(1)).sum()),
+    return (float((m * moment(r, w)).sum()), c, float((m * (r * r).sum(1)).sum()),
             float(np.sqrt((r * r).sum(1)).max()))
 
 
@@ -104,7 +101,7 @@ def main() -> None:
                     sign = np.where(nodes.alpha == b.index, 1.0, -1.0)[mine]
                     lever = nodes.position[mine] - 0.5 * (c0 + c1)
                     impulse = sign[:, None] * contacts.impulse[mine]  # on the grain
-                    torque = float(_cross(lever, impulse).sum())
+                    torque = float(moment(lever, impulse).sum())
                     # Σ P R: the impulses pressing on the grain along its lever, per Δt
                     predicted = theta * dt * omega * float(-(lever * impulse).sum())
                 work = sim.gap_correction_work / max(sim.wall_work, 1e-300)

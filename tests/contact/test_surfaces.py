@@ -262,8 +262,8 @@ def test_one_pass_takes_the_smaller_grains_points_only():
 
 def test_auto_passes_take_one_pass_on_frictional_pairs_only():
     """``grain_passes = "auto"`` (the default): one pass for a pair with friction, two for a
-    frictionless one (a loaded grain spins up under one pass without friction:
-    docs/dev-notes.md, session 45); "one" and "two" hold for every pair."""
+    frictionless one (frictionless one pass is slower and its overlaps deeper:
+    docs/dev-notes.md, #11 next step 000); "one" and "two" hold for every pair."""
     from softgrains.contact.coupling import one_pass_rule
 
     mu = np.array([[0.0, 0.5, 0.0], [0.5, 0.0, 0.02], [0.0, 0.02, 0.0]])

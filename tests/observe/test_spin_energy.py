@@ -17,7 +17,7 @@ def test_spin_energy_is_the_rigid_spin_and_ignores_translation_and_strain(dim):
     centre = np.array([(mass[body == b, None] * x[body == b]).sum(0) / mass[body == b].sum()
                        for b in (0, 1)])
     r = x - centre[body]
-    spin = np.cross(np.c_[r, np.zeros(n)] if dim == 2 else r, omega)[:, :dim] * -1.0
+    spin = np.cross(omega, np.c_[r, np.zeros(n)] if dim == 2 else r)[:, :dim]  # ω × r
     translation = np.ones(dim) * 0.7
     # body 0: spin and translation; body 1: translation and a pure stretch (no spin)
     v = np.where((body == 0)[:, None], spin + translation, translation + 0.4 * r)
