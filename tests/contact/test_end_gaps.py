@@ -146,3 +146,27 @@ def test_grain_contact_rows_see_their_cell_edge_move(shape_function, deformation
         assert np.all((true - found.gap)[under] < -0.8 * strain * spacing / 2)
     error = np.abs(true - found.gap - _linear_change(found, steps))[under]
     assert error.max() < 0.003 * H
+
+
+@pytest.mark.parametrize("slope", [-1.0, -2.0, -0.5])
+def test_the_end_gap_fixed_point_settles_where_the_true_gap_outruns_its_linearisation(
+        slope):
+    """The loop's end-gap fixed point (coupling._end_gap_offsets) on a model contact: its
+    linearised end gap is held at its bound, g_lin = −o (start gap 0, offset o), and its
+    true end gap moves with the offset at a slope σ, g⁺(o) = c + σ o, aim A. The plain
+    update o ← o + (g⁺ − A) settles in one update where g⁺ moves as g_lin does (σ = −1)
+    and swings for ever where it moves twice as fast (σ = −2: 0 ↔ (A − c)); seen between
+    two grains at seed 6's step 301 of the frictional example, session 47). With the
+    secant on the last two updates each σ settles within three updates."""
+    from softgrains.contact.coupling import _end_gap_offsets
+
+    h = 1e-3
+    aim, c = -0.025 * h, -0.05 * h
+    slack = np.array([0.0 - aim])  # between the linear bound (0) and the aim
+    corrected = np.array([True])
+    offset, before = np.zeros(1), None
+    for _ in range(3):
+        true = c + slope * offset
+        step = _end_gap_offsets(true, -offset, slack, corrected, (offset, before))
+        before, offset = (offset, true), step
+    assert c + slope * offset[0] == pytest.approx(aim, abs=1e-6 * h)

@@ -26,7 +26,8 @@ step of the bodies with a solve of the contact problem.
     step's u): where g⁺ is an overlap below its floor (its start gap, and at least
     −GAP_OVERLAP h) by GAP_ERROR h (past −GAP_LIMIT h by any amount: ``_short_of``),
     the constraint is moved by the error e = g⁺ − g_lin, re-evaluated
-    after each solve (a fixed point on the nonlinear gap), and the loop goes on (at most
+    after each solve (a fixed point on the nonlinear gap, a secant step from its second
+    update: ``_end_gap_offsets``), and the loop goes on (at most
     GAP_UPDATES times a step; a gap still below its floor then makes the step
     unconverged: it moved too far for its start geometry). Without it the linearisation's
     errors stay as overlaps and add up (session 15); or until the loop stalls (no progress
@@ -414,6 +415,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     bias = held / (theta * dt)
     end_gap_offset = np.zeros(n)  # the end-of-step gaps' linearisation errors (end_gaps.py)
     corrected = np.zeros(n, bool)  # the contacts whose constraint carries that error
+    last_update = None  # (offsets, true end gaps) at the update before (the secant's)
     # the linear constraint holds g_lin ≥ predicted − held; the true end gap's floor is
     # min(predicted, −GAP_OVERLAP h): an overlap may not deepen, nor pass GAP_OVERLAP h
     floor_gap = np.minimum(predicted, -GAP_OVERLAP * lattice.h)
@@ -602,7 +604,10 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             newly = _on(n, at, short)
             linear = predicted + theta * dt * np.einsum("ci,ci->c", actual_all,
                                                         contacts.normal)
-            offset = _end_gap_offsets(true, at, linear, slack, corrected | newly)
+            true_all = np.full(n, np.nan)
+            true_all[at] = true
+            offset = _end_gap_offsets(true_all, linear, slack, corrected | newly,
+                                      (end_gap_offset, last_update))
             settled = np.abs(offset - end_gap_offset).max(initial=0.0) < GAP_ERROR * lattice.h
             if not short.any() and (settled or diag.gap_updates >= GAP_UPDATES):
                 finished = True
@@ -615,6 +620,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 short_gap = (int(at[worst]), float(true[worst]), float(floor_gap[at[worst]]))
                 break
             corrected |= newly
+            last_update = (end_gap_offset, true_all)
             end_gap_offset = offset
             bias = (held + end_gap_offset) / (theta * dt)
             diag.gap_updates += 1
@@ -840,17 +846,30 @@ def _short_of(floor: np.ndarray, h: float) -> np.ndarray:
     return np.maximum(floor - GAP_ERROR * h, np.minimum(floor, -GAP_LIMIT * h))
 
 
-def _end_gap_offsets(true: np.ndarray, at: np.ndarray, linear: np.ndarray,
-                     slack: np.ndarray, corrected: np.ndarray) -> np.ndarray:
-    """The offsets o = min(e + s, 0) of the ``corrected`` contacts' constraints (0
-    elsewhere), from the error e = g⁺ − g_lin of the linearised end-of-step gap g_lin
-    (``linear``) against the true one g⁺ (``true``, end_gaps.py, of the contacts ``at``)
-    and the ``slack`` s between what the linear constraint holds and the true gap's aim
-    (its floor plus its margin): the constraint g_lin ≥ … − o then holds g⁺ at or above
-    the aim while e stays."""
-    error = np.zeros(linear.size)
-    error[at] = np.nan_to_num(true - linear[at])
-    return np.where(corrected, np.minimum(error + slack, 0.0), 0.0)
+def _end_gap_offsets(true: np.ndarray, linear: np.ndarray, slack: np.ndarray,
+                     corrected: np.ndarray, history: tuple) -> np.ndarray:
+    """The next offsets o of the ``corrected`` contacts' constraints (0 elsewhere): a
+    secant step on the true end gap g⁺(o) (``true``, end_gaps.py; NaN: not a point
+    contact) towards its aim A (floor plus margin). The plain update o + r, r = g⁺ − A,
+    is min(e + s, 0) from the error e = g⁺ − g_lin of the linearised end gap g_lin
+    (``linear``) and the ``slack`` s = g_lin's bound − A: it holds g⁺ at A while e stays,
+    i.e. where g⁺ moves with o as g_lin does (dg⁺/do = −1). Where two updates give the
+    slope σ = Δg⁺/Δo, the step is o + ω r with ω = −1/σ (within [1/4, 2]): between two
+    grains whose contact turns with the step g⁺ moved twice as fast as g_lin, and the
+    plain update swung between two offsets (session 47, seed 6's step 301 of the
+    frictional example: r −0.041, +0.026, −0.039 h at one contact). ``history``: the
+    current offsets and, from the update before, (offsets, true end gaps) or None."""
+    offset, before = history
+    error = np.nan_to_num(true - linear)
+    plain = np.minimum(error + slack, 0.0)
+    weight = np.ones_like(plain)
+    if before is not None:
+        change = offset - before[0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            slope = (true - before[1]) / change
+        known = np.isfinite(slope) & (slope < 0.0) & (np.abs(change) > 0.0)
+        weight[known] = np.clip(-1.0 / slope[known], 0.25, 2.0)
+    return np.where(corrected, np.minimum(offset + weight * (plain - offset), 0.0), 0.0)
 
 
 def _predicted_velocity(step, rows: np.ndarray, du: np.ndarray | None) -> np.ndarray:
