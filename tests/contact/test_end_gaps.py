@@ -155,9 +155,9 @@ def test_the_end_gap_fixed_point_settles_where_the_true_gap_outruns_its_linearis
     linearised end gap is held at its bound, g_lin = −o (start gap 0, offset o), and its
     true end gap moves with the offset at a slope σ, g⁺(o) = c + σ o, aim A. The plain
     update o ← o + (g⁺ − A) settles in one update where g⁺ moves as g_lin does (σ = −1)
-    and swings for ever where it moves twice as fast (σ = −2: 0 ↔ (A − c)); seen between
-    two grains at seed 6's step 301 of the frictional example, session 47). With the
-    secant on the last two updates each σ settles within three updates."""
+    and swings for ever where it moves twice as fast (σ = −2: 0 ↔ A − c), as between two
+    grains at seed 6's step 301 of the frictional example (session 47). With the secant on
+    the last two updates each σ settles within three updates."""
     from softgrains.contact.coupling import _end_gap_offsets
 
     h = 1e-3

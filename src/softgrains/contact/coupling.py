@@ -148,12 +148,13 @@ WORKING_SET_GAP = 0.1
 # sign does so every step (a grain point sliding along the flattened, conforming surface
 # of a loaded contact: −0.0016 h a step for 50 steps in the frictionless main job,
 # session 24). Beyond GAP_LIMIT h an overlap may not deepen at all: any end gap below its
-# floor there is corrected, its constraint aimed GAP_SETTLE h above the floor so that the
-# fixed point's residual (a few % of the correction) does not leave it below (elsewhere
-# the aim is the floor, GAP_ERROR h or at least GAP_SETTLE h above the trigger). (Session 47:
-# accepted GAP_SETTLE h below its floor, as before, the end gap became the next step's
-# floor, and an overlap past the limit crept by up to GAP_SETTLE h a step: 0.0101 →
-# 0.0126 h in 40 steps with the limit at 0.01 h, tests/protocol/test_compaction.py.)
+# floor there is corrected. A corrected constraint aims at its floor, or GAP_SETTLE h
+# above its trigger where the two are closer (past the limit, where the trigger is the
+# floor itself), so that the fixed point's residual (a few % of the correction) does not
+# leave it below the trigger, at which alone it is accepted. (Until session 47 it was
+# accepted GAP_SETTLE h below its floor, which became the next step's floor: an overlap
+# past the limit crept by up to GAP_SETTLE h a step, 0.0101 → 0.0126 h in 40 steps with
+# the limit at 0.01 h; tests/protocol/test_compaction.py.)
 GAP_OVERLAP, GAP_ERROR, GAP_UPDATES = 0.025, 0.002, 3
 GAP_LIMIT, GAP_SETTLE = 0.04, 0.0005
 # the surface side of a grain pair's point contact takes its impulses' moment at its
