@@ -370,8 +370,9 @@ class Simulation:
 
     def unsettled_kinetic_energy(self) -> np.ndarray:
         """Per body its kinetic energy, less the spin (observe.energies.spin_energies) of a
-        body whose every contact is frictionless: nothing couples that spin to the packing,
-        so, as a rattler's motion, it is no sign that the packing has not settled."""
+        body whose friction with every body is 0 (its every contact frictionless): nothing
+        couples that spin to the packing, so, as a rattler's motion, it is no sign that the
+        packing has not settled."""
         m, s = self.model, self.state
         ek = np.zeros(len(m.bodies))
         np.add.at(ek, m.body_id, 0.5 * m.mass * np.einsum("ij,ij->i", s.v, s.v))

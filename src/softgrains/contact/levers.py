@@ -136,9 +136,7 @@ def lever_moments(sides: SurfaceSides, steps: dict, P: np.ndarray,
 def rotation_basis(step) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(m_I, r_I, J⁻¹): the active nodes' lumped masses, positions about their mass centre
     and the inverse of their polar (2D, 1 × 1) or inertia (3D) moment."""
-    lattice, box = step.stepper.lattice, step.box
-    local = np.stack(np.unravel_index(step.active, tuple(box.shape), order="F"), axis=1)
-    positions = lattice.node_origin + lattice.h * (box.lower + local)
+    positions = step.stepper.lattice.node_positions(step.box)[step.active]
     m = step.m[:, 0]
     r = positions - (m[:, None] * positions).sum(axis=0) / m.sum()
     polar = float((m * (r * r).sum(axis=1)).sum())
