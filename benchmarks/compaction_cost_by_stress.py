@@ -4,7 +4,8 @@ cost bar; the dense steps are the high-stress bands).
 For each run folder (series.csv and case.toml), the compaction rows are grouped by the
 wall stress σ_yy/σ0 of the step; per band: steps, seconds a step (mean, median, max, from
 the cumulative ``wall_time``), coupling iterations a step, and the ratio of the mean to
-the first run's in the same band. Runs of different code versions are compared this way:
+the first run's in the same band; then per run its slowest compaction step over the
+compaction's median (#11's tail bar). Runs of different code versions are compared this way:
 start the same example from each checkout side by side with NUMBA_NUM_THREADS=1 (a run
 stopped early, e.g. with SIGTERM, covers the bands it reached).
 Run:  python benchmarks/compaction_cost_by_stress.py RUN_A RUN_B ... [--bands 0 2 10 40 100 200 400]
@@ -51,6 +52,21 @@ def band_costs(run: Path, bands: list[float]) -> list[dict | None]:
     return rows
 
 
+def slowest_step(run: Path) -> tuple[float, int, float, int]:
+    """The slowest compaction step over the compaction's median (#11's "no step above 10×
+    the median"): (ratio, its step number, its σ_yy/σ0, its coupling iterations). Its time
+    includes any failed attempt the step-size controller undid."""
+    table = read_table(run / "series.csv")
+    wall = np.asarray(table["wall_time"], float)
+    seconds = np.diff(wall, prepend=0.0)
+    chosen = np.flatnonzero(np.asarray(table["phase"]) == "compaction")
+    worst = chosen[np.argmax(seconds[chosen])]
+    ratio = np.asarray(table["stress_yy"], float) / _sigma0(run / "case.toml")
+    return (float(seconds[worst] / statistics.median(seconds[chosen])),
+            int(table["step"][worst]), float(ratio[worst]),
+            int(table["contact_iterations"][worst]))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("runs", type=Path, nargs="+")
@@ -70,6 +86,11 @@ def main() -> None:
             print(f"| {run} | {args.bands[i]:g}–{args.bands[i + 1]:g} | {row['steps']} "
                   f"| {row['mean']:.2f} | {row['median']:.2f} | {row['max']:.2f} "
                   f"| {row['its']:.1f} | {ratio} |")
+    print("\n| run | slowest compaction step / median | step | σ/σ0 | coupling its |")
+    print("| --- | --- | --- | --- | --- |")
+    for run in args.runs:
+        over, at, stress, its = slowest_step(run)
+        print(f"| {run} | {over:.1f}× | {at} | {stress:.0f} | {its} |")
 
 
 if __name__ == "__main__":
