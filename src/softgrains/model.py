@@ -176,7 +176,8 @@ def build(case) -> tuple[Model, State]:
         kind=sim.integrator, theta=sim.theta, beta=sim.newmark_beta, gamma=sim.newmark_gamma,
         flip=sim.flip, mass_matrix=sim.mass_matrix, tolerance=sim.newton_tolerance,
         max_iterations=sim.newton_max_iterations,
-        linear_solver=sim.linear_solver, tangent=sim.tangent)
+        linear_solver=sim.linear_solver, tangent=sim.tangent,
+        stress_form=sim.stress_form)
     model = Model(
         dim=dim, lattice=lattice, shape_kind=SHAPE_FUNCTIONS[grid.shape_function],
         points_per_cell=grid.points_per_cell, bodies=bodies, mass=np.concatenate(masses),

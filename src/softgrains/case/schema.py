@@ -111,6 +111,14 @@ class SimulationSettings(_Section):
         "quasi-static steps a snap-through or a spinning rattler moves grains several "
         "cells); when the retry_halvings are spent the run stops. Not checked when the "
         "case has a single body")
+    stress_form: Literal["consistent", "momentum"] = Field(
+        "consistent", description="internal forces of the θ = 1 step: consistent (the "
+        "exact gradient of the strain energy) or momentum (experimental: the end state's "
+        "second Piola–Kirchhoff stress pushed forward by the start-of-step F, whose "
+        "moment about the start nodes vanishes, so that the step keeps a free grain's "
+        "angular momentum and a loaded grain has no spinning solution; for free bodies of "
+        "objective laws; other θ, Newmark, held bodies and the linear law always take the "
+        "consistent form)")
     tangent: Literal["auto", "projected", "exact"] = Field(
         "auto", description="Newton matrix: exact (quadratic convergence), per-point "
         "tangents made positive semi-definite (robust under compression, linear "

@@ -446,6 +446,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                    max_iterations=settings.solver_iterations, floor=floor)
     done = {i: b.converged(limit=False) for i, b in steps.items()}
     failed_solves = 0
+    tangent_from = 0  # the iteration of the last tangent switch
     actual_all = None  # the relative velocities at the bodies' iterate (after an update)
     in_contact = set(everywhere.bodies)
     closing_rate = WORKING_SET_GAP * lattice.h / (theta * dt)
@@ -529,12 +530,16 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             progress.restart()
             continue
         failed_solves += failed
-        if failed_solves >= AUTO_TANGENT_FAILED_SOLVES or k >= AUTO_TANGENT_ITERATIONS:
+        if (failed_solves >= AUTO_TANGENT_FAILED_SOLVES
+                or k - tangent_from >= AUTO_TANGENT_ITERATIONS):
             # tangent = "auto": an exact tangent can make W indefinite under compression
             # (the contact problem then has no unique solution) or converge slowly: the
             # projected tangent from here on (this iteration's directions are dropped)
             switched = [i for i, b in steps.items() if b.use_projected_tangent()]
             if switched:
+                # (a body of the momentum form stiffens its rotations instead: the switch
+                # gets as many iterations and failed solves before the next one)
+                failed_solves, tangent_from = 0, k
                 for i in switched:
                     done[i] = False
                 slots.W = [None] * len(slots.W)

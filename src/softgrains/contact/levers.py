@@ -66,8 +66,11 @@ def surface_sides(points, point_contact: np.ndarray, steps: dict,
     pairs = np.stack([points.alpha, points.beta], axis=1)
     distinct, which = np.unique(pairs, axis=0, return_inverse=True)
     single = np.array([one_pass(int(a), int(b)) for a, b in distinct], bool)
+    # a body whose internal forces have the momentum form keeps its angular momentum by
+    # itself: its lever would add the moment δ × P the pair's impulses do not have
+    balanced = [b for b, step in steps.items() if not step.momentum_form]
     keep = np.flatnonzero((point_contact >= 0) & single[which.ravel()]
-                          & np.isin(surface, list(steps))
+                          & np.isin(surface, balanced)
                           & np.isin(np.where(points.owner_is_alpha, points.alpha,
                                              points.beta), list(steps)))
     if keep.size == 0:

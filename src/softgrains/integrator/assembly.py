@@ -21,7 +21,7 @@ from numba import njit, prange
 
 from softgrains.grid.transfers import deformation_increment, matmul
 from softgrains.materials.dispatch import pk1_and_tangent, strain_energy
-from softgrains.materials.tensor import determinant
+from softgrains.materials.tensor import determinant, inverse
 from softgrains.threads import parallel_kernel
 
 
@@ -139,11 +139,52 @@ def project_to_psd(Av, p, M):
                     Av[p, i, a, k, b] = acc
 
 
+@njit(cache=True, inline="always")
+def momentum_form(dF, Pv, Av, p, want_tangent, dFinv, S, T):
+    """The momentum form of the point's stress and tangent (in place):
+
+        V^n P̃ = V⁰ F S Fⁿᵀ  →  Ŝ = V⁰ Fⁿ S Fⁿᵀ = ΔF⁻¹ (V^n P̃)   (symmetric)
+        V^n Ã  →  ∂Ŝ/∂(∇u) = ΔF⁻¹ (V^n Ã − δ ⊗ Ŝ)             (not major-symmetric)
+
+    with S the end-of-step second Piola–Kirchhoff stress and F = ΔF Fⁿ. Ŝ is symmetric,
+    so the internal forces −Σ Ŝ ∇N have no moment about the start nodes for any u: the
+    θ = 1 step keeps each free body's angular momentum (docs/theory.md). V^n Ã's
+    geometric part δ_jk (V⁰ F S Fⁿᵀ)_ab drops out (Ŝ changes with u only through S).
+    Scratch: dFinv, S (d×d), T (d×d×d×d)."""
+    d = dF.shape[0]
+    inverse(dF, dFinv)
+    for i in range(d):
+        for a in range(d):
+            acc = 0.0
+            for j in range(d):
+                acc += dFinv[i, j] * Pv[p, j, a]
+            S[i, a] = acc
+    if want_tangent:
+        for i in range(d):
+            for a in range(d):
+                for k in range(d):
+                    for b in range(d):
+                        acc = -dFinv[i, k] * S[a, b]
+                        for j in range(d):
+                            acc += dFinv[i, j] * Av[p, j, a, k, b]
+                        T[i, a, k, b] = acc
+        for i in range(d):
+            for a in range(d):
+                for k in range(d):
+                    for b in range(d):
+                        Av[p, i, a, k, b] = T[i, a, k, b]
+    for i in range(d):
+        for a in range(d):
+            Pv[p, i, a] = 0.5 * (S[i, a] + S[a, i])
+
+
 @parallel_kernel(cache=True, nogil=True)
 def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangent, n_chunks,
-                   project=False):
+                   project=False, momentum=False):
     """Per point: Pv = V^n P̃ (d×d) and, if ``want_tangent``, Av = V^n Ã (d×d×d×d), made
-    positive semi-definite per point when ``project`` (:func:`project_to_psd`).
+    positive semi-definite per point when ``project`` (:func:`project_to_psd`); with
+    ``momentum``, both in the momentum form of :func:`momentum_form` (not for the linear
+    law, whose stress is no push-forward of an objective S).
 
     Points are processed in ``n_chunks`` chunks (a few per thread), each with its own
     scratch arrays (no allocation per point). Returns (smallest J of the trial state, strain
@@ -163,6 +204,8 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
         Fn = np.empty((d, d))
         A = np.empty((d, d, d, d))
         psd = np.empty((d * d, d * d))
+        S = np.empty((d, d))
+        T = np.empty((d, d, d, d))
         jmin = np.inf
         energy = 0.0
         for p in range(c * n // n_chunks, (c + 1) * n // n_chunks):
@@ -184,7 +227,10 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
                     for M in range(d):
                         acc += P[i, M] * Fn[a, M]
                     Pv[p, i, a] = scale * acc
+            objective = momentum and law[p] != 1
             if not want_tangent:
+                if objective:
+                    momentum_form(dF, Pv, Av, p, False, Finv, S, T)
                 continue
             # V^n Ã_iakb = (V^n/J^n) Σ_MN A_iMkN Fn_aM Fn_bN
             for i in range(d):
@@ -196,6 +242,8 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
                                 for N_ in range(d):
                                     acc += A[i, M, k, N_] * Fn[a, M] * Fn[b, N_]
                             Av[p, i, a, k, b] = scale * acc
+            if objective:
+                momentum_form(dF, Pv, Av, p, True, Finv, S, T)
             if project:
                 project_to_psd(Av, p, psd)
         Jmin_chunk[c] = jmin

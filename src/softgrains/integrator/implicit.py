@@ -53,6 +53,7 @@ from softgrains.integrator.assembly import (
     point_stresses,
 )
 from softgrains.integrator.linear_solvers import (
+    DENSE_LIMIT,
     MIRROR_LIMIT,
     DenseCholesky,
     LinearSolver,
@@ -60,11 +61,21 @@ from softgrains.integrator.linear_solvers import (
     factorize,
     mirrored_negative_modes,
 )
+from softgrains.integrator.rotations import (
+    DecoupledSparse,
+    RigidRotations,
+    corrected_solve,
+    decoupled_dense,
+    rotation_stiffness,
+    symmetric_factorization,
+)
+from softgrains.materials.dispatch import LAW_CODES
 from softgrains.threads import threads_for
 
 ACTIVE_MASS_FRACTION = 1e-4  # lighter nodes (fraction of the heaviest point) are removed
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
 CHUNKS_PER_THREAD = 8  # point chunks per thread in the parallel kernels
+LINEAR_LAW = LAW_CODES["linear-elastic"]  # its stress is no push-forward of an objective S
 MAX_LINE_SEARCH = 8  # halvings of a Newton update in the backtracking line search
 
 
@@ -82,6 +93,7 @@ class IntegratorSettings:
     max_iterations: int = 25
     linear_solver: str = "auto"
     tangent: str = "auto"  # "auto" (exact, projected when it fails) | "exact" | "projected"
+    stress_form: str = "consistent"  # "consistent" (V⁰ P Fⁿᵀ) | "momentum" (θ = 1: V⁰ Fⁿ S Fⁿᵀ)
 
 
 @dataclass(frozen=True)
@@ -188,15 +200,16 @@ def line_search(u, du, r, pi, internal_force, residual, potential, enough=0.0):
             r_try = residual(u_try, f_try)
             n_try = float(np.linalg.norm(r_try))
             trial = (u_try, f_try, r_try, n_try, j_try, pi_try)
-            armijo = slope < 0.0 and pi_try <= pi + 1e-4 * alpha * slope
+            armijo = np.isfinite(pi) and slope < 0.0 and pi_try <= pi + 1e-4 * alpha * slope
             if np.isfinite(n_try) and (armijo or n_try <= max((1.0 - 1e-4 * alpha) * rnorm,
                                                               enough)):
                 return trial
-            if np.isfinite(n_try) and (best is None or pi_try < best[5]):
-                best = trial
+            key = pi_try if np.isfinite(pi) else n_try
+            if np.isfinite(n_try) and (best is None or key < best[6]):
+                best = trial + (key,)
         alpha *= 0.5
     if best is not None:
-        return best
+        return best[:6]
     return u_try, f_try, residual(u_try, f_try), float("nan"), j_try, float("nan")
 
 
@@ -254,6 +267,7 @@ class BodyStep:
                  step: int) -> None:
         st = self.settings = stepper.settings
         self.stepper, self.pts, self.dt, self.step = stepper, pts, dt, step
+        self._momentum = None  # cached momentum_form
         self._projected = False  # tangent = "auto": switched to projected in this step
         self._mirrored = False  # tangent = "auto": negative modes mirrored in this step
         d = self.d = stepper.lattice.dim
@@ -343,9 +357,26 @@ class BodyStep:
         self._bsr = None  # the Newton matrix object over self.data (newton_matrix)
         self._A_at = None  # the iterate u (the array) _A was built at
         self._mirrored_at = None  # (u, A⁺) made by mirror_negative_modes at that u
+        self._exact = None  # momentum form: the exact (non-symmetric) Newton matrix
+        self._stiff_rotation = False  # momentum form: stiffen_rotation was called
+        self._rotations = None  # momentum form: the body's RigidRotations (set up once)
         self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
 
     # -- the Newton matrix's tangent ---------------------------------------------------
+    @property
+    def momentum_form(self) -> bool:
+        """Whether the body's internal forces take the momentum form (assembly.momentum_form:
+        their moment about the start nodes vanishes, as the θ = 1 step's angular momentum
+        balance needs): ``stress_form = "momentum"``, the θ-scheme with θ = 1, a free body
+        (no prescribed node: a held body's supports take its moment) of objective laws
+        (the linear law's stress is no push-forward)."""
+        if self._momentum is None:
+            st = self.settings
+            self._momentum = bool(
+                st.stress_form == "momentum" and not self.newmark and st.theta == 1.0
+                and not self.fixed.any() and np.all(self.pts.law != LINEAR_LAW))
+        return self._momentum
+
     @property
     def projected(self) -> bool:
         """Whether the Newton matrix uses per-point PSD-projected tangents: always with
@@ -360,10 +391,27 @@ class BodyStep:
 
     def use_projected_tangent(self) -> bool:
         """With ``tangent = "auto"``, switch to the projected tangent for the rest of the
-        step (the iterate is kept; only the Newton matrix changes). True if it switched."""
+        step (the iterate is kept; only the Newton matrix changes); with the momentum form
+        :meth:`stiffen_rotation` instead. True if it switched."""
+        if self.momentum_form:  # its tangent has no rotational negative mode to project
+            return self.stiffen_rotation()
         if not self.can_project():
             return False
         self._projected, self._mirrored = True, False
+        self._A = self._lu = None
+        return True
+
+    def stiffen_rotation(self) -> bool:
+        """With the momentum form and ``tangent = "auto"``: from now on in this step the
+        Newton matrix's rigid rotations take the stiffness of rotations.rotation_stiffness
+        (the residual, and so the solution, unchanged): the auto tangent's remedy when
+        the contact solves fail, where the rotations' inertia alone leaves their
+        compliance ill-conditioned. The only one: the projected tangent made things worse
+        (session 48: 40 iterations without convergence on the frictional squeeze). True
+        if it switched."""
+        if not self.momentum_form or self._stiff_rotation or not self.can_project():
+            return False
+        self._stiff_rotation = True
         self._A = self._lu = None
         return True
 
@@ -376,10 +424,13 @@ class BodyStep:
         Newton matrix changes, not the residual: the step's solution is the same. False
         where it does not apply: projected or exact tangent, a body above MIRROR_LIMIT
         unknowns (no dense eigensolve), or A without a negative mode."""
+        if self.momentum_form:  # no negative rotation mode to mirror: stiffen it instead
+            return self.stiffen_rotation()
         if not self.can_project() or self._mirrored or self.u.size > MIRROR_LIMIT:
             return False
         current = self._A is None or self._A_at is self.u
-        A = self._A if self._A is not None else self.newton_matrix()
+        A = self._A if self._A is not None else (
+            self._momentum_matrix() if self.momentum_form else self.newton_matrix())
         mirrored = mirrored_negative_modes(A, self.m.ravel())
         if mirrored is None:
             return False
@@ -391,16 +442,34 @@ class BodyStep:
         return True
 
     def _matrix(self):
-        """The Newton matrix at the iterate: A (sparse), or A⁺ (dense) once mirrored."""
+        """The Newton matrix at the iterate: A (sparse; with the momentum form
+        :meth:`_momentum_matrix`'s), or A⁺ (dense) once mirrored."""
         self._A_at = self.u
         if self._mirrored:
             kept, self._mirrored_at = self._mirrored_at, None
             if kept is not None and kept[0] is self.u:
                 return kept[1]
-            A = self.newton_matrix()
-            mirrored = mirrored_negative_modes(A, self.m.ravel())
-            return dense(A) if mirrored is None else mirrored
-        return self.newton_matrix()
+        A = self._momentum_matrix() if self.momentum_form else self.newton_matrix()
+        if not self._mirrored or isinstance(A, DecoupledSparse):
+            return A
+        mirrored = mirrored_negative_modes(A, self.m.ravel())
+        return dense(A) if mirrored is None else mirrored
+
+    def _momentum_matrix(self):
+        """With the momentum form: the exact (non-symmetric) Newton matrix is kept for the
+        direction's defect correction (:attr:`_exact`) and its symmetric form with the
+        rigid rotations decoupled (rotations.py) is returned: dense up to DENSE_LIMIT
+        unknowns, above as its factorization (:class:`DecoupledSparse`)."""
+        A = self._exact = self.newton_matrix()
+        if self._rotations is None:
+            positions = self.stepper.lattice.node_positions(self.box)[self.active]
+            self._rotations = RigidRotations.of(positions, self.m[:, 0],
+                                                lambda v: self.mass_times(v).copy())
+        block = (rotation_stiffness(self._rotations, self.Pv, self.c_m, self.s_f)
+                 if self._stiff_rotation else self.c_m * self._rotations.inertia)
+        if A.shape[0] > DENSE_LIMIT:
+            return DecoupledSparse(A, self._rotations, block)
+        return decoupled_dense(A, self._rotations, block)
 
     # -- the step equations ------------------------------------------------------------
     def mass_times(self, u: np.ndarray) -> np.ndarray:
@@ -417,7 +486,8 @@ class BodyStep:
         with threads_for(self.nodes.shape[0]):
             jmin, w_int = point_stresses(self.nodes, self.dN, self.u_box, self.F_n,
                                          self.vol_n, pts.law, pts.lam, pts.mu, self.Pv,
-                                         self.Av, want_tangent, self.n_chunks, self.projected)
+                                         self.Av, want_tangent, self.n_chunks, self.projected,
+                                         self.momentum_form)
             if jmin > 0.0:
                 gather_forces(self.ptr, self.entries, self.dN, self.Pv, self.f_int)
                 if want_tangent:
@@ -431,6 +501,8 @@ class BodyStep:
         return r
 
     def potential(self, u: np.ndarray, w_int: float) -> float:
+        if self.momentum_form:  # not the gradient of a potential: no Π to decrease
+            return float("nan")
         return float(0.5 * self.c_m * np.sum(u * self.mass_times(u)) - np.sum(self.b * u)
                      + self.s_f * w_int)
 
@@ -501,7 +573,9 @@ class BodyStep:
         if self._lu is None:
             if self._A is None:
                 self._A = self._matrix()
-            self._lu = factorize(self._A)
+            self._lu = (self._A if isinstance(self._A, DecoupledSparse)
+                        else symmetric_factorization(self._A) if self.momentum_form
+                        else factorize(self._A))
         return self._lu
 
     # -- Newton ------------------------------------------------------------------------
@@ -627,6 +701,8 @@ class BodyStep:
     def _direction(self, direct: bool) -> np.ndarray:
         A = self._A = self._matrix()
         solver, res = self.stepper.solver, self.result
+        if self.momentum_form:
+            return self._momentum_direction(A)
         try:
             du = solver.solve(A, -self.r.ravel(), self.diag_slot, direct).reshape(self.u.shape)
         except (np.linalg.LinAlgError, RuntimeError) as err:
@@ -638,6 +714,23 @@ class BodyStep:
         res.linear_method = solver.last_method
         res.linear_iterations += solver.last_iterations
         return du
+
+    def _momentum_direction(self, A) -> np.ndarray:
+        """du = −A⁻¹R with the exact Newton matrix of the momentum form, by defect
+        correction from its decoupled symmetric form A (rotations.py), whose
+        factorization is kept for the contacts' compliance."""
+        res, rhs = self.result, -self.r.ravel()
+        try:
+            self._lu = A if isinstance(A, DecoupledSparse) else symmetric_factorization(A)
+            du, corrections = corrected_solve(self._exact, self._lu, rhs, self._lu.solve(rhs))
+        except (np.linalg.LinAlgError, RuntimeError) as err:
+            raise SimulationError(
+                f"step {self.step}: linear solve of body '{self.stepper.name}' failed at "
+                f"Newton iteration {res.iterations}: {err}", step=self.step,
+                body=self.stepper.name, residuals=res.residuals) from err
+        res.linear_method = "direct"
+        res.linear_iterations += 1 + corrections
+        return du.reshape(self.u.shape)
 
     def take_step(self, du: np.ndarray) -> None:
         """u ← u + α du by the line search (one Newton iteration). With ``tangent = "auto"``,
