@@ -326,3 +326,16 @@ def test_consistent_mass_with_one_point_per_cell_is_refused() -> None:
     case["grid"]["points_per_cell"] = 1
     with pytest.raises(CaseError, match=r"\[simulation.mass_matrix\].*points_per_cell"):
         load_case(case)
+
+
+@pytest.mark.parametrize("change", [{"theta": 0.5}, {"integrator": "newmark"}])
+def test_the_momentum_form_needs_theta_one(change) -> None:
+    """stress_form = "momentum" balances moments about the start nodes, which only the
+    θ = 1 step does: another θ or Newmark is refused with the fix, not silently run with
+    the consistent form."""
+    case = minimal_case()
+    case["simulation"].update(stress_form="momentum", **change)
+    with pytest.raises(CaseError, match=r"\[simulation.stress_form\].*theta = 1.0"):
+        load_case(case)
+    case["simulation"]["stress_form"] = "consistent"
+    load_case(case)

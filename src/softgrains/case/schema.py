@@ -116,9 +116,8 @@ class SimulationSettings(_Section):
         "exact gradient of the strain energy) or momentum (experimental: the end state's "
         "second Piola–Kirchhoff stress pushed forward by the start-of-step F, whose "
         "moment about the start nodes vanishes, so that the step keeps a free grain's "
-        "angular momentum and a loaded grain has no spinning solution; for free bodies of "
-        "objective laws; other θ, Newmark, held bodies and the linear law always take the "
-        "consistent form)")
+        "angular momentum and a loaded grain has no spinning solution; θ = 1 only; bodies "
+        "with prescribed nodes and linear-elastic bodies keep the consistent form)")
     tangent: Literal["auto", "projected", "exact"] = Field(
         "auto", description="Newton matrix: exact (quadratic convergence), per-point "
         "tangents made positive semi-definite (robust under compression, linear "
@@ -141,6 +140,15 @@ class SimulationSettings(_Section):
                        'acceleration history grows in modes the grid cannot see; use "lumped", '
                        'or integrator = "theta"')
             raise Problems([Problem(("mass_matrix",), self.mass_matrix, message)])
+        return self
+
+    @model_validator(mode="after")
+    def _check_stress_form(self) -> SimulationSettings:
+        if self.stress_form == "momentum" and (self.integrator != "theta" or self.theta != 1.0):
+            message = ('the momentum form is the θ = 1 step\'s (its moment vanishes about the '
+                       'start nodes, where backward Euler balances angular momentum): set '
+                       'integrator = "theta" and theta = 1.0, or stress_form = "consistent"')
+            raise Problems([Problem(("stress_form",), self.stress_form, message)])
         return self
 
     @model_validator(mode="after")

@@ -429,8 +429,7 @@ class BodyStep:
         if not self.can_project() or self._mirrored or self.u.size > MIRROR_LIMIT:
             return False
         current = self._A is None or self._A_at is self.u
-        A = self._A if self._A is not None else (
-            self._momentum_matrix() if self.momentum_form else self.newton_matrix())
+        A = self._A if self._A is not None else self.newton_matrix()
         mirrored = mirrored_negative_modes(A, self.m.ravel())
         if mirrored is None:
             return False
@@ -442,18 +441,19 @@ class BodyStep:
         return True
 
     def _matrix(self):
-        """The Newton matrix at the iterate: A (sparse; with the momentum form
-        :meth:`_momentum_matrix`'s), or A⁺ (dense) once mirrored."""
+        """The Newton matrix at the iterate: A (sparse), or A⁺ (dense) once mirrored; with
+        the momentum form :meth:`_momentum_matrix`'s (never mirrored)."""
         self._A_at = self.u
+        if self.momentum_form:
+            return self._momentum_matrix()
         if self._mirrored:
             kept, self._mirrored_at = self._mirrored_at, None
             if kept is not None and kept[0] is self.u:
                 return kept[1]
-        A = self._momentum_matrix() if self.momentum_form else self.newton_matrix()
-        if not self._mirrored or isinstance(A, DecoupledSparse):
-            return A
-        mirrored = mirrored_negative_modes(A, self.m.ravel())
-        return dense(A) if mirrored is None else mirrored
+            A = self.newton_matrix()
+            mirrored = mirrored_negative_modes(A, self.m.ravel())
+            return dense(A) if mirrored is None else mirrored
+        return self.newton_matrix()
 
     def _momentum_matrix(self):
         """With the momentum form: the exact (non-symmetric) Newton matrix is kept for the

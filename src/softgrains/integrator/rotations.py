@@ -14,7 +14,9 @@ factorization and the contacts' compliance is therefore
 
 (R: the rotations as columns) — symmetric, the rotations decoupled from the strain and
 their equation exact — and the exact direction A⁻¹b is reached from it by defect
-correction (:func:`corrected_solve`).
+correction (:func:`corrected_solve`). (The exact A factorised by LU, with the contacts'
+compliance symmetrised, sent the quasi-static squeeze's disk spinning: the asymmetry
+lives in the rotations' huge compliance. docs/theory.md has the derivation.)
 """
 
 from __future__ import annotations
@@ -163,8 +165,10 @@ def symmetric_factorization(A_s: np.ndarray):
 def corrected_solve(A, factorization, b: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, int]:
     """x → A⁻¹b by defect correction x ← x + A_s⁻¹(b − A x) (A_s⁻¹: ``factorization``),
     from x = A_s⁻¹ b: at most CORRECTIONS, until a correction is below
-    CORRECTION_TOLERANCE ‖x‖; one that grows is not taken (A_s⁻¹(A_s − A) contracts by
-    O(|ΔF − I|): it does on every step measured). Returns (x, corrections taken)."""
+    CORRECTION_TOLERANCE ‖x‖; one that grows is not taken (A_s⁻¹(A_s − A) is
+    O(|ΔF − I|): on the frictionless example the first correction is 7.6e-3 of x in the
+    median, 0.11 at the 99th percentile, each next one 1e-2–1e-3 of the last, session 48).
+    Returns (x, corrections taken)."""
     last = np.inf
     for taken in range(CORRECTIONS):
         step = factorization.solve(b - A @ x)
