@@ -78,11 +78,13 @@ def decoupled_dense(A: sp.bsr_matrix, rotations: RigidRotations, block: np.ndarr
 def _decoupled(indptr, indices, data, R, Q, inertia, out):
     """out = PᵀĀP + Q B Qᵀ from BSR (indptr, indices, data) (``inertia``: the rotations'
     block B): Ā = ½(A + Aᵀ) and ĀR scattered from the blocks, then one pass of rank
-    updates over out's rows."""
+    updates over out's rows (the rotation vectors stored by rotation, contiguous)."""
     n, k = R.shape
     d = data.shape[1]
     out[:, :] = 0.0
-    AR = np.zeros((n, k))
+    RT = np.ascontiguousarray(R.T)
+    QT = np.ascontiguousarray(Q.T)
+    ART = np.zeros((k, n))
     for r in range(indptr.shape[0] - 1):
         for q in range(indptr[r], indptr[r + 1]):
             c = indices[q]
@@ -92,24 +94,27 @@ def _decoupled(indptr, indices, data, R, Q, inertia, out):
                     out[r * d + i, c * d + j] += half
                     out[c * d + j, r * d + i] += half
                     for a in range(k):
-                        AR[r * d + i, a] += half * R[c * d + j, a]
-                        AR[c * d + j, a] += half * R[r * d + i, a]
+                        ART[a, r * d + i] += half * RT[a, c * d + j]
+                        ART[a, c * d + j] += half * RT[a, r * d + i]
     C = inertia.copy()
     for a in range(k):
         for b in range(k):
-            for i in range(n):
-                C[a, b] += R[i, a] * AR[i, b]
-    QC = np.zeros((n, k))
-    for i in range(n):
-        for a in range(k):
-            for b in range(k):
-                QC[i, b] += Q[i, a] * C[a, b]
-    for i in range(n):
-        for j in range(n):
             acc = 0.0
-            for a in range(k):
-                acc += QC[i, a] * Q[j, a] - Q[i, a] * AR[j, a] - AR[i, a] * Q[j, a]
-            out[i, j] += acc
+            for i in range(n):
+                acc += RT[a, i] * ART[b, i]
+            C[a, b] += acc
+    QCT = np.zeros((k, n))
+    for b in range(k):
+        for a in range(k):
+            for i in range(n):
+                QCT[b, i] += QT[a, i] * C[a, b]
+    for i in range(n):
+        row = out[i]
+        for a in range(k):
+            qc, qi, ai = QCT[a, i], QT[a, i], ART[a, i]
+            qa, ara = QT[a], ART[a]
+            for j in range(n):
+                row[j] += qc * qa[j] - qi * ara[j] - ai * qa[j]
 
 
 class DecoupledSparse:
