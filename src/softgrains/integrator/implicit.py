@@ -407,8 +407,10 @@ class BodyStep:
         (the residual, and so the solution, unchanged): the auto tangent's remedy when
         the contact solves fail, where the rotations' inertia alone leaves their
         compliance ill-conditioned. The only one: the projected tangent made things worse
-        (session 48: 40 iterations without convergence on the frictional squeeze). True
-        if it switched."""
+        (session 48: 40 iterations without convergence on the frictional squeeze). Its
+        trade-off (docs/dev-notes.md, next step 0(a)): the frictionless D/h 10 squeeze
+        5.2 / 12 coupling iterations with it, 7.7 / 47 without; the frictional one 3
+        retried steps with it, 1 without. True if it switched."""
         if not self.momentum_form or self._stiff_rotation or not self.can_project():
             return False
         self._stiff_rotation = True
