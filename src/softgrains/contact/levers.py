@@ -29,6 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from softgrains.integrator.rotations import mass_centred
+
 
 @dataclass(frozen=True)
 class SurfaceSides:
@@ -141,7 +143,7 @@ def rotation_basis(step) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     and the inverse of their polar (2D, 1 × 1) or inertia (3D) moment."""
     positions = step.stepper.lattice.node_positions(step.box)[step.active]
     m = step.m[:, 0]
-    r = positions - (m[:, None] * positions).sum(axis=0) / m.sum()
+    r = mass_centred(positions, m)
     polar = float((m * (r * r).sum(axis=1)).sum())
     if r.shape[1] == 2:
         return m, r, np.array([[1.0 / polar]])

@@ -191,7 +191,7 @@ def line_search(u, du, r, pi, internal_force, residual, potential, enough=0.0):
     slope = float(np.sum(r * du))
     rnorm = float(np.linalg.norm(r))
     alpha = 1.0
-    best = None
+    best, best_key = None, np.inf
     for _ in range(MAX_LINE_SEARCH + 1):
         u_try = u + alpha * du
         f_try, j_try, w_try = internal_force(u_try, False)
@@ -204,12 +204,12 @@ def line_search(u, du, r, pi, internal_force, residual, potential, enough=0.0):
             if np.isfinite(n_try) and (armijo or n_try <= max((1.0 - 1e-4 * alpha) * rnorm,
                                                               enough)):
                 return trial
-            key = pi_try if np.isfinite(pi) else n_try
-            if np.isfinite(n_try) and (best is None or key < best[6]):
-                best = trial + (key,)
+            key = pi_try if np.isfinite(pi) else n_try  # (no Π: the momentum form)
+            if np.isfinite(n_try) and (best is None or key < best_key):
+                best, best_key = trial, key
         alpha *= 0.5
     if best is not None:
-        return best[:6]
+        return best
     return u_try, f_try, residual(u_try, f_try), float("nan"), j_try, float("nan")
 
 
@@ -267,7 +267,6 @@ class BodyStep:
                  step: int) -> None:
         st = self.settings = stepper.settings
         self.stepper, self.pts, self.dt, self.step = stepper, pts, dt, step
-        self._momentum = None  # cached momentum_form
         self._projected = False  # tangent = "auto": switched to projected in this step
         self._mirrored = False  # tangent = "auto": negative modes mirrored in this step
         d = self.d = stepper.lattice.dim
@@ -295,6 +294,14 @@ class BodyStep:
         v_n = self.v_n = self.v_free.copy()  # lumped estimate (predictor, FLIP)
         a_n = self.a_n = q_n / m if self.newmark else np.zeros_like(v_n)
         fixed, vbar = self.fixed, self.vbar = stepper._dirichlet(self.box, active)
+        # whether the internal forces take the momentum form (assembly.momentum_form: no
+        # moment about the start nodes, as the θ = 1 step's angular momentum balance
+        # needs): stress_form = "momentum", θ = 1, a free body (no prescribed node: a held
+        # body's supports take its moment) of objective laws (the linear law's stress is
+        # no push-forward)
+        self.momentum_form = bool(
+            st.stress_form == "momentum" and not self.newmark and st.theta == 1.0
+            and not fixed.any() and np.all(pts.law != LINEAR_LAW))
         v_n[fixed] = vbar[fixed]
         a_n[fixed] = 0.0
         if not self.consistent:
@@ -363,20 +370,6 @@ class BodyStep:
         self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
 
     # -- the Newton matrix's tangent ---------------------------------------------------
-    @property
-    def momentum_form(self) -> bool:
-        """Whether the body's internal forces take the momentum form (assembly.momentum_form:
-        their moment about the start nodes vanishes, as the θ = 1 step's angular momentum
-        balance needs): ``stress_form = "momentum"``, the θ-scheme with θ = 1, a free body
-        (no prescribed node: a held body's supports take its moment) of objective laws
-        (the linear law's stress is no push-forward)."""
-        if self._momentum is None:
-            st = self.settings
-            self._momentum = bool(
-                st.stress_form == "momentum" and not self.newmark and st.theta == 1.0
-                and not self.fixed.any() and np.all(self.pts.law != LINEAR_LAW))
-        return self._momentum
-
     @property
     def projected(self) -> bool:
         """Whether the Newton matrix uses per-point PSD-projected tangents: always with
@@ -708,10 +701,7 @@ class BodyStep:
         try:
             du = solver.solve(A, -self.r.ravel(), self.diag_slot, direct).reshape(self.u.shape)
         except (np.linalg.LinAlgError, RuntimeError) as err:
-            raise SimulationError(
-                f"step {self.step}: linear solve of body '{self.stepper.name}' failed at "
-                f"Newton iteration {res.iterations}: {err}", step=self.step,
-                body=self.stepper.name, residuals=res.residuals) from err
+            raise self._solve_failed(err) from err
         self._lu = solver.last_factorization
         res.linear_method = solver.last_method
         res.linear_iterations += solver.last_iterations
@@ -726,13 +716,18 @@ class BodyStep:
             self._lu = A if isinstance(A, DecoupledSparse) else symmetric_factorization(A)
             du, corrections = corrected_solve(self._exact, self._lu, rhs, self._lu.solve(rhs))
         except (np.linalg.LinAlgError, RuntimeError) as err:
-            raise SimulationError(
-                f"step {self.step}: linear solve of body '{self.stepper.name}' failed at "
-                f"Newton iteration {res.iterations}: {err}", step=self.step,
-                body=self.stepper.name, residuals=res.residuals) from err
+            raise self._solve_failed(err) from err
         res.linear_method = "direct"
         res.linear_iterations += 1 + corrections
         return du.reshape(self.u.shape)
+
+    def _solve_failed(self, err: Exception) -> SimulationError:
+        """The diagnosis of a failed linear solve of the Newton system."""
+        res = self.result
+        return SimulationError(
+            f"step {self.step}: linear solve of body '{self.stepper.name}' failed at "
+            f"Newton iteration {res.iterations}: {err}", step=self.step,
+            body=self.stepper.name, residuals=res.residuals)
 
     def take_step(self, du: np.ndarray) -> None:
         """u ← u + α du by the line search (one Newton iteration). With ``tangent = "auto"``,

@@ -36,6 +36,11 @@ CORRECTIONS = 6
 CORRECTION_TOLERANCE = 1e-6
 
 
+def mass_centred(positions: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """The positions about their mass centre (masses m, one per position)."""
+    return positions - (m[:, None] * positions).sum(axis=0) / m.sum()
+
+
 @dataclass(frozen=True)
 class RigidRotations:
     """A body's rigid rotations about its nodal mass centre: R (unknowns × k, k = 1 in 2D,
@@ -51,7 +56,7 @@ class RigidRotations:
            mass_times: Callable[[np.ndarray], np.ndarray]) -> RigidRotations:
         """From the active nodes' positions, their lumped masses m (one per node) and the
         product by the step's mass matrix (lumped or consistent) on (nodes, d) arrays."""
-        r = positions - (m[:, None] * positions).sum(axis=0) / m.sum()
+        r = mass_centred(positions, m)
         n, d = r.shape
         if d == 2:
             columns = [np.stack([-r[:, 1], r[:, 0]], axis=1)]
