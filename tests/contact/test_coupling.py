@@ -163,6 +163,9 @@ class _Body:
     def contact_response(self, rows, delassus, sites=None):
         return None, np.eye(2) if self.projected else self.exact
 
+    def rigid_modes(self, rows, sites=None):
+        return np.zeros((self.exact.shape[0] // 2, 2, 3))  # held: no rigid mode
+
     def use_projected_tangent(self):
         switched, self.projected = not self.projected, True
         return switched
@@ -190,7 +193,7 @@ def test_a_body_with_an_indefinite_compliance_switches_to_the_projected_tangent(
     indefinite, singular = _Body([[1.0, 2.0], [2.0, 1.0]]), _Body([[1.0, 1.0], [1.0, 1.0]])
     steps = {3: indefinite, 5: singular}
     slots = SimpleNamespace(bodies=[3, 5], W=[None, None], response=[None, None],
-                            rows=[None, None], semidefinite=[False, False],
+                            rigid=[None, None], rows=[None, None], semidefinite=[False, False],
                             impulse_basis=[None, None], H=[None, None],
                             compliance=lambda slot, W: W)
     fresh = {3, 5}
@@ -325,6 +328,50 @@ def test_the_compliance_at_sites_is_the_rows_compliance_mapped():
     q = rng.standard_normal(X_sites.shape[1])
     np.testing.assert_allclose(response_sites.move(q), X_sites @ q,
                                atol=1e-12 * np.abs(X_sites @ q).max())
+
+
+@pytest.mark.parametrize("form", ["consistent", "momentum"])
+def test_the_rigid_modes_carry_a_free_disks_compliance_at_a_quasi_static_step(form):
+    """BodyStep.rigid_modes G: a free disk's translations, and with the momentum form its
+    rigid rotation, are modes of inertia alone, so their share G Gᵀ of its compliance W is
+    a rigid body's: I/m + r⊥ r⊥ᵀ/I (m and I the active nodes' mass and inertia about their
+    mass centre; the consistent form's rotation is left in W). What is left, W − G Gᵀ, is
+    the deformation's: positive semidefinite, and at Δt c/h ~2400 a small part of W. A
+    held disk has no rigid mode (G = 0)."""
+    from softgrains.integrator.implicit import BodyStep
+    from softgrains.integrator.rotations import mass_centred
+
+    case = {
+        "simulation": {"dt": 20.0, "steps": 1, "stress_form": form},  # Δt c/h ≈ 2400
+        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
+        "materials": {"gel": {"law": "neo-hookean", "young": 1e5, "poisson": 0.3,
+                              "density": 1000.0}},
+        "bodies": [{"name": "disk", "shape": "disk", "center": [1.0, 1.0], "radius": 0.5,
+                    "material": "gel"}],
+        "output": {"progress": False},
+    }
+    sim = Simulation(load_case(case))
+    step = BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
+                    np.zeros(2), 20.0, 0)
+    assert step.momentum_form == (form == "momentum")
+    rows = np.arange(0, step.u.shape[0], 7)
+    _, W = step.contact_response(rows, True)
+    G = step.rigid_modes(rows).reshape(rows.size * 2, -1)
+    m = step.m[:, 0]
+    expected = np.kron(np.ones((rows.size, rows.size)), np.eye(2)) / m.sum()
+    if form == "momentum":
+        r = mass_centred(step.stepper.lattice.node_positions(step.box)[step.active], m)
+        inertia = float(np.sum(m * np.einsum("ij,ij->i", r, r)))
+        perp = np.stack([-r[rows, 1], r[rows, 0]], axis=1).ravel()
+        expected += np.outer(perp, perp) / inertia
+    np.testing.assert_allclose(G @ G.T, expected, rtol=1e-10, atol=1e-12 * expected.max())
+    deformation = np.linalg.eigvalsh(W - G @ G.T)
+    assert deformation.min() > -1e-9 * np.abs(W).max()
+    if form == "momentum":  # the deformation's share is small: measured 6e-3 of W's trace
+        assert np.trace(W - G @ G.T) < 1e-2 * np.trace(W)
+    held = _disk_step()
+    held.fixed[0] = True
+    assert not held.rigid_modes(np.arange(5)).any()
 
 
 def test_the_compliance_by_cholesky_is_the_one_by_lu():

@@ -744,3 +744,48 @@ def test_the_delassus_product_reads_the_rows_of_the_nonzero_impulses(d):
     with pytest.raises(ValueError, match="symmetric"):
         one_body_problem(np.triu(np.ones((2 * d, 2 * d))), np.zeros(2 * d),
                          np.tile(np.eye(d)[0], (2, 1)))
+
+
+def _saved(name: str) -> tuple[ContactProblem, np.ndarray, ContactSolverOptions]:
+    """A problem saved with its warm start and solver options (contact_problems_from_run)."""
+    path = DATA / name
+    with np.load(path) as data:
+        start = data["warm_start"]
+        saved = {f: data[f"option_{f}"].item() for f in
+                 ("tolerance", "max_iterations", "floor", "tresca", "fallbacks", "acceptable",
+                  "warmup")}
+    return ContactProblem.load(path), start, ContactSolverOptions(**saved)
+
+
+def test_a_stalled_solve_is_tried_again_on_the_contacts_deformation_scale(monkeypatch):
+    """rigid_dominated_squeeze.npz: 25 contacts of the quasi-static frictional squeeze (a
+    free disk between μ = 0.5 plates, D/h 10, Δt c/h 3000, stress_form = "momentum"; a
+    coupling iteration of step 5, session 49), with its warm start and the loop's options
+    (tolerance 7e-3). The disk's rigid modes of inertia alone carry all but ~2e-5 of each
+    W_cc (problem.rigid), so ρ_c = 1/W_cc,nn is its inertia, not the contacts' stiffness:
+    on that scale the Newton and its fallbacks stall at 1.3e-2 after 247 iterations
+    (measured). solve() then does it all again on the deformation scale
+    (problem.deformation_masses, here 3e4–6e4 × the normal masses): 1.7e-9 (measured)."""
+    from softgrains.contact.problem import deformation_masses, normal_masses
+
+    problem, start, options = _saved("rigid_dominated_squeeze.npz")
+    ratio = deformation_masses(problem) / normal_masses(problem)
+    assert ratio.min() > 1e3  # the rigid modes carry all but < 1e-3 of every W_cc
+    result = solve(problem, start, options)
+    assert result.converged and residual_norm(problem, result.impulse) <= options.tolerance
+    _assert_signorini_coulomb(problem, result.impulse, 1e-6, 1e-2)
+    monkeypatch.setattr(solvers, "_rigid_dominated", lambda problem: False)
+    stalled = solve(ContactProblem.load(DATA / "rigid_dominated_squeeze.npz"), start, options)
+    assert not stalled.converged and stalled.residual > options.tolerance
+
+
+def test_the_deformation_masses_without_rigid_modes_are_the_normal_masses():
+    """problem.deformation_masses: where no rigid mode is known (lumped compliances, held
+    bodies, problems saved before session 49) they are the normal masses 1/W_cc,nn, and a
+    stalled solve is not tried again."""
+    from softgrains.contact.problem import deformation_masses, normal_masses
+
+    problem = ContactProblem.load(DATA / "surface_sites_quasi_static.npz")
+    assert problem.rigid.size == 0
+    np.testing.assert_array_equal(deformation_masses(problem), normal_masses(problem))
+    assert not solvers._rigid_dominated(problem)

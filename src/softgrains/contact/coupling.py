@@ -78,7 +78,7 @@ from softgrains.contact.solvers import ContactSolverOptions, solve
 from softgrains.contact.surfaces import select
 from softgrains.errors import SimulationError
 from softgrains.grid.lattice import Lattice
-from softgrains.integrator.implicit import ImpulseResponse
+from softgrains.integrator.implicit import RIGID_MODES, ImpulseResponse
 from softgrains.threads import over_bodies
 
 IMPULSE_FLOOR = 1e-14  # relative to the largest momentum of a contact node
@@ -767,20 +767,23 @@ def _update_compliances(steps: dict, slots: Slots, fresh: set, delassus: bool) -
     Newton matrix changed (the bodies ``fresh``); whether every W_s is positive
     semidefinite on the impulses its contacts can carry (``_impulse_basis``; where A is
     SPD it is: a projected tangent, or A factorised by Cholesky; otherwise checked)."""
-    def update(slot: int) -> tuple[ImpulseResponse | None, np.ndarray, bool]:
+    def update(slot: int) -> tuple[ImpulseResponse | None, np.ndarray, np.ndarray, bool]:
         body, H = slots.bodies[slot], slots.H[slot] if delassus else None
-        response, W = steps[body].contact_response(slots.rows[slot], delassus, H)
+        step = steps[body]
+        response, W = step.contact_response(slots.rows[slot], delassus, H)
+        rigid = (step.rigid_modes(slots.rows[slot], H) if delassus  # (lumped: none)
+                 else np.zeros((slots.sites(slot), slots.d, RIGID_MODES[slots.d])))
         W = W if H is not None else slots.compliance(slot, W)
-        return response, W, (not delassus or steps[body].projected
-                             or (response is not None and response.positive_definite)
-                             or _semidefinite(W, slots.impulse_basis[slot]))
+        return response, W, rigid, (not delassus or step.projected
+                                    or (response is not None and response.positive_definite)
+                                    or _semidefinite(W, slots.impulse_basis[slot]))
 
     stale = [slot for slot, body in enumerate(slots.bodies)
              if slots.W[slot] is None or (delassus and body in fresh)]
-    for slot, (response, W, semidefinite) in zip(stale, over_bodies(update, stale),
-                                                  strict=True):
-        slots.response[slot], slots.W[slot], slots.semidefinite[slot] = (response, W,
-                                                                         semidefinite)
+    for slot, (response, W, rigid, semidefinite) in zip(stale, over_bodies(update, stale),
+                                                         strict=True):
+        slots.response[slot], slots.W[slot], slots.rigid[slot] = response, W, rigid
+        slots.semidefinite[slot] = semidefinite
     return all(slots.semidefinite)
 
 
@@ -908,6 +911,12 @@ def _velocity_weight(settings) -> float:
     return settings.beta / settings.gamma if settings.kind == "newmark" else settings.theta
 
 
+def _stacked_modes(modes: list[np.ndarray], d: int) -> np.ndarray:
+    """The bodies' rigid modes at their sites (BodyStep.rigid_modes, (k_s, d, m) each) in
+    one (k_total, d, m) array."""
+    return np.concatenate(modes) if modes else np.zeros((0, d, 0))
+
+
 def _problem(slots: Slots, contacts: ContactNodes, wall_va: np.ndarray, wall_vb: np.ndarray,
              bias: np.ndarray, mu: np.ndarray, V: np.ndarray, P: np.ndarray) -> ContactProblem:
     """The contact problem at the bodies' current iterate: their row velocities V with the
@@ -917,6 +926,7 @@ def _problem(slots: Slots, contacts: ContactNodes, wall_va: np.ndarray, wall_vb:
         b_slot=slots.b_slot, b_col=slots.b_col, wall_va=wall_va, wall_vb=wall_vb,
         k_off=slots.k_off, k_size=slots.k_size,
         w_off=np.r_[0, np.cumsum([w.size for w in slots.W])][:-1].astype(np.int64),
-        W=np.concatenate([w.ravel() for w in slots.W]), V_free=V.copy())
+        W=np.concatenate([w.ravel() for w in slots.W]), V_free=V.copy(),
+        rigid=_stacked_modes(slots.rigid, V.shape[1]))
     problem.V_free -= problem.compliance_times(problem.row_impulses(P))  # nothing cached yet
     return problem

@@ -94,6 +94,8 @@ class Slots:
         # the bodies' impulse responses (BodyStep.contact_response; None: lumped)
         self.response: list = [None] * len(body_ids)
         self.W: list[np.ndarray | None] = [None] * len(body_ids)
+        # ... and the share of each site's W_cc its rigid modes carry (k, d, d; coupling.py)
+        self.rigid: list[np.ndarray | None] = [None] * len(body_ids)
         self.semidefinite = [False] * len(body_ids)  # W known to be PSD (coupling.py)
         # per body: the span of the impulses its contacts can carry (None: all; coupling.py)
         self.impulse_basis: list = [None] * len(body_ids)
@@ -131,6 +133,7 @@ class Slots:
         new.k_off = np.r_[0, np.cumsum(new.k_size)][:-1].astype(np.int64)
         new.response = [None] * len(new.bodies)
         new.W = [None] * len(new.bodies)
+        new.rigid = [None] * len(new.bodies)
         new.semidefinite = [False] * len(new.bodies)
         new.impulse_basis = [None] * len(new.bodies)
         return new

@@ -77,6 +77,7 @@ RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
 CHUNKS_PER_THREAD = 8  # point chunks per thread in the parallel kernels
 LINEAR_LAW = LAW_CODES["linear-elastic"]  # its stress is no push-forward of an objective S
 MAX_LINE_SEARCH = 8  # halvings of a Newton update in the backtracking line search
+RIGID_MODES = {2: 3, 3: 6}  # a body's rigid modes by dimension (translations, rotations)
 
 
 @dataclass(frozen=True)
@@ -367,6 +368,7 @@ class BodyStep:
         self._exact = None  # momentum form: the exact (non-symmetric) Newton matrix
         self._stiff_rotation = False  # momentum form: stiffen_rotation was called
         self._rotations = None  # momentum form: the body's RigidRotations (set up once)
+        self._rotation_block = None  # ... and their block B in the latest Newton matrix
         self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
 
     # -- the Newton matrix's tangent ---------------------------------------------------
@@ -460,8 +462,9 @@ class BodyStep:
             positions = self.stepper.lattice.node_positions(self.box)[self.active]
             self._rotations = RigidRotations.of(positions, self.m[:, 0],
                                                 lambda v: self.mass_times(v).copy())
-        block = (rotation_stiffness(self._rotations, self.Pv, self.c_m, self.s_f)
-                 if self._stiff_rotation else self.c_m * self._rotations.inertia)
+        block = self._rotation_block = (
+            rotation_stiffness(self._rotations, self.Pv, self.c_m, self.s_f)
+            if self._stiff_rotation else self.c_m * self._rotations.inertia)
         if A.shape[0] > DENSE_LIMIT:
             return DecoupledSparse(A, self._rotations, block)
         return decoupled_dense(A, self._rotations, block)
@@ -561,6 +564,36 @@ class BodyStep:
         # projected forms too), so W is; made so exactly (the LU solves leave ~1e-12) for
         # the contact solvers' products by block rows (delassus.product)
         return ImpulseResponse(w, factorization, E, free, X), 0.5 * (W + W.T)
+
+    def rigid_modes(self, rows: np.ndarray, sites: sp.spmatrix | None = None) -> np.ndarray:
+        """G (k, d, d + r): the body's rigid modes of inertia alone at its contact sites,
+        scaled so that G_c G_c'ᵀ is their share of the compliance block W_cc' (as
+        :meth:`contact_response`'s, Delassus). A mode g with A g = λ M g is a term
+        g gᵀ/(λ gᵀMg) of A⁻¹, so its share is κ w (H_c g)(H_c' g)ᵀ/(λ gᵀMg). The
+        translations are such modes of every free body (K g = 0, λ = c_m): their share
+        κ w/(c_m m) I = I/m, the velocity an impulse gives the whole body's mass; with the
+        momentum form so are the r rigid rotations (rotations.py; λ gᵀMg their block B):
+        κ w (H_c R) B⁻¹ (H_c' R)ᵀ. Columns of zeros where a mode does not apply; all zero
+        for a body with a prescribed dof (no rigid mode). At quasi-static steps these
+        modes carry nearly all of W_cc (a free disk squeezed at Δt c/h 3000: all but
+        2e-5 of it)."""
+        d = self.d
+        k = rows.size if sites is None else sites.shape[0] // d
+        G = np.zeros((k, d, RIGID_MODES[d]))
+        rotations = RIGID_MODES[d] - d
+        if self.fixed.any():
+            return G
+        kappa, _ = self.velocity_affine()
+        scale = kappa * self.impulse_weight
+        # the translations: H_c g = e_a (the sites' weights sum to one)
+        G[:, :, :d] = np.eye(d) * np.sqrt(scale / (self.c_m * self.m[:, 0].sum()))
+        if self.momentum_form and self._rotation_block is not None:
+            dofs = (rows[:, None] * d + np.arange(d)).ravel()
+            R = self._rotations.fields[dofs]
+            at_sites = (R if sites is None else sites @ R).reshape(k, d, rotations)
+            root = np.linalg.cholesky(np.linalg.inv(self._rotation_block))
+            G[:, :, d:] = np.sqrt(scale) * at_sites @ root
+        return G
 
     def factorization(self):
         """The factorization of the current Newton matrix A (Cholesky where A is positive
