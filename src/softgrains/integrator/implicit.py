@@ -400,12 +400,14 @@ class BodyStep:
         """With the momentum form and ``tangent = "auto"``: from now on in this step the
         Newton matrix's rigid rotations take the stiffness of rotations.rotation_stiffness
         (the residual, and so the solution, unchanged): the auto tangent's remedy when
-        the contact solves fail, where the rotations' inertia alone leaves their
-        compliance ill-conditioned. The only one: the projected tangent made things worse
-        (session 48: 40 iterations without convergence on the frictional squeeze). Its
-        trade-off (docs/dev-notes.md, next step 0(a)): the frictionless D/h 10 squeeze
-        5.2 / 12 coupling iterations with it, 7.7 / 47 without; the frictional one 3
-        retried steps with it, 1 without. True if it switched."""
+        the contact solves fail or the loop takes many iterations, where the rotations'
+        inertia alone leaves their compliance ill-conditioned. The only one: the projected
+        tangent made things worse (session 48: 40 iterations without convergence on the
+        frictional squeeze). Its trade-off (docs/dev-notes.md, next step 0(a)): the
+        frictionless D/h 10 squeeze 5.2 / 12 coupling iterations with it, 7.7 / 47
+        without; on the frictional one the body's step then leaves the torque residual
+        (the defect correction's ratio 1 − c_m I/B ≈ 1), which alternates and grows, one
+        step retried with it or without (session 49). True if it switched."""
         if not self.momentum_form or self._stiff_rotation or not self.can_project():
             return False
         self._stiff_rotation = True
