@@ -336,8 +336,8 @@ def test_the_rigid_modes_carry_a_free_disks_compliance_at_a_quasi_static_step(fo
     rigid rotation, are modes of inertia alone, so their share G Gᵀ of its compliance W is
     a rigid body's: I/m + r⊥ r⊥ᵀ/I (m and I the active nodes' mass and inertia about their
     mass centre; the consistent form's rotation is left in W). What is left, W − G Gᵀ, is
-    the deformation's: positive semidefinite, and at Δt c/h ~2400 a small part of W. A
-    held disk has no rigid mode (G = 0)."""
+    the deformation's: positive semidefinite, and at Δt c/h ~2400 a small part of W. At
+    sites H the modes are H G. A held disk has no rigid mode (G = 0)."""
     from softgrains.integrator.implicit import BodyStep
     from softgrains.integrator.rotations import mass_centred
 
@@ -369,6 +369,14 @@ def test_the_rigid_modes_carry_a_free_disks_compliance_at_a_quasi_static_step(fo
     assert deformation.min() > -1e-9 * np.abs(W).max()
     if form == "momentum":  # the deformation's share is small: measured 6e-3 of W's trace
         assert np.trace(W - G @ G.T) < 1e-2 * np.trace(W)
+    # at sites v_s = H v_rows (a patch of points whose blocks are not the identity) the
+    # modes are the rows' mapped: H G, for the translations as for the rotation
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(3)
+    H = sp.csr_matrix(rng.random((6, rows.size * 2)) * (rng.random((6, rows.size * 2)) < 0.4))
+    np.testing.assert_allclose(step.rigid_modes(rows, H).reshape(6, -1), H @ G,
+                               atol=1e-14 * np.abs(G).max())
     held = _disk_step()
     held.fixed[0] = True
     assert not held.rigid_modes(np.arange(5)).any()

@@ -779,13 +779,25 @@ def test_a_stalled_solve_is_tried_again_on_the_contacts_deformation_scale(monkey
     assert not stalled.converged and stalled.residual > options.tolerance
 
 
-def test_the_deformation_masses_without_rigid_modes_are_the_normal_masses():
-    """problem.deformation_masses: where no rigid mode is known (lumped compliances, held
-    bodies, problems saved before session 49) they are the normal masses 1/W_cc,nn, and a
-    stalled solve is not tried again."""
+def test_the_deformation_masses_leave_out_the_rigid_modes_share():
+    """problem.deformation_masses on a hand-made problem: one body, two contacts against a
+    wall with normal e_y, W_s = G Gᵀ + D (G: one rigid mode, D the deformation's part, its
+    normal components [[a, b], [b, c]]). ρ_c = max(1/W_cc,nn, 1/(|D_cc| + |D_cc'|)): for
+    the first contact, whose W_cc the rigid mode dominates, 1/(a + |b|) (2000 × its normal
+    mass); for the second, where the rigid share is smaller than |b|, the normal mass
+    1/W_cc,nn. Without rigid modes they are the normal masses."""
     from softgrains.contact.problem import deformation_masses, normal_masses
 
-    problem = ContactProblem.load(DATA / "surface_sites_quasi_static.npz")
-    assert problem.rigid.size == 0
+    a, b, c = 1e-6, -4e-6, 1e-3
+    D = np.zeros((4, 4))
+    D[1, 1], D[1, 3], D[3, 1], D[3, 3] = a, b, b, c
+    D[0, 0] = D[2, 2] = 1e-6  # tangential
+    G = np.array([[0.0], [1e-1], [0.0], [1e-3]])  # (rows d, modes): y-components 0.1, 1e-3
+    W = G @ G.T + D
+    problem = one_body_problem(W, np.zeros(4), [[0.0, 1.0], [0.0, 1.0]])
     np.testing.assert_array_equal(deformation_masses(problem), normal_masses(problem))
-    assert not solvers._rigid_dominated(problem)
+    problem.rigid = G.reshape(2, 2, 1)
+    problem._cache.clear()
+    expected = [1.0 / (a + abs(b)), 1.0 / W[3, 3]]  # c + |b| > W_33: the normal mass
+    np.testing.assert_allclose(deformation_masses(problem), expected, rtol=1e-9)
+    assert solvers._rigid_dominated(problem)

@@ -361,9 +361,10 @@ def _normal_masses(problem: ContactProblem) -> np.ndarray:
 
 def deformation_masses(problem: ContactProblem) -> np.ndarray:
     """A normal mass per contact that leaves out what its bodies' rigid modes of inertia
-    alone carry (``rigid``): 1/Σ_c' |n_c·(W_cc' − G_c G_c'ᵀ)·n_c'| over the contacts c'
-    sharing a body with c (a bound on how fast the bodies' deformation alone moves the
-    contact under the loads of its neighbours), never below :func:`normal_masses`. At a
+    alone carry (``rigid``): 1/Σ_s Σ_c' |n_c·(W_s − G G ᵀ)_cc'·n_c'|, over each body s the
+    contact touches and the contacts c' touching s too (a bound on how fast the bodies'
+    deformation alone moves the contact under the loads of its neighbours), never below
+    :func:`normal_masses`. At a
     quasi-static step the rigid modes carry nearly all of W_cc (Δt c/h 3000: all but
     2e-5 of a free disk's), and 1/W_cc,nn is then the bodies' inertia, not the contact's
     stiffness (solvers.py tries this scale where the first Newton stalls)."""
@@ -374,19 +375,41 @@ def _deformation_masses(problem: ContactProblem) -> np.ndarray:
     rho = normal_masses(problem)
     if problem.rigid.size == 0:
         return rho
-    n, d = problem.normal, problem.dim
     contact, slot, col, _ = problem.touches()
-    G = np.einsum("ci,cim->cm", n[contact], problem.rigid[problem.k_off[slot] + col])
+    G = np.einsum("ci,cim->cm", problem.normal[contact],
+                  problem.rigid[problem.k_off[slot] + col])
     spread = np.zeros(problem.n_contacts)
-    for s in np.unique(slot):
-        on = slot == s
-        k = int(problem.k_size[s])
-        block = problem.W[problem.w_off[s]:problem.w_off[s] + k * d * k * d].reshape(
-            k, d, k, d)[col[on]][:, :, col[on]]
-        own = np.einsum("ai,aibj,bj->ab", n[contact[on]], block, n[contact[on]])
-        np.add.at(spread, contact[on], np.abs(own - G[on] @ G[on].T).sum(axis=1))
+    _deformation_spread(contact, slot, col, problem.normal, problem.W, problem.w_off,
+                        problem.k_size, G, spread)
     with np.errstate(divide="ignore"):
         return np.maximum(rho, np.where(spread > 0.0, 1.0 / spread, 0.0))
+
+
+@njit(cache=True, nogil=True)
+def _deformation_spread(contact, slot, col, normal, W, w_off, k_size, G, spread):
+    """spread_c += Σ_c' |n_c·(W_s[col_c, col_c'] − G_c G_c'ᵀ)·n_c'| over the touches of each
+    body slot s (``contact``, ``slot``, ``col`` grouped by slot; G: n·G per touch)."""
+    t, d = contact.shape[0], normal.shape[1]
+    start = 0
+    while start < t:
+        s = slot[start]
+        end = start
+        while end < t and slot[end] == s:
+            end += 1
+        kd = k_size[s] * d
+        for a in range(start, end):
+            row_sum = 0.0
+            for b in range(start, end):
+                w = 0.0
+                for i in range(d):
+                    base = w_off[s] + (col[a] * d + i) * kd + col[b] * d
+                    for j in range(d):
+                        w += normal[contact[a], i] * W[base + j] * normal[contact[b], j]
+                for m in range(G.shape[1]):
+                    w -= G[a, m] * G[b, m]
+                row_sum += abs(w)
+            spread[contact[a]] += row_sum
+        start = end
 
 
 def impulse_scale(problem: ContactProblem) -> float:

@@ -94,7 +94,8 @@ class Slots:
         # the bodies' impulse responses (BodyStep.contact_response; None: lumped)
         self.response: list = [None] * len(body_ids)
         self.W: list[np.ndarray | None] = [None] * len(body_ids)
-        # ... and the share of each site's W_cc its rigid modes carry (k, d, d; coupling.py)
+        # ... and their rigid modes of inertia alone at the sites, G (k, d, m) with G_c G_c'ᵀ
+        # their share of W_cc' (BodyStep.rigid_modes; coupling.py)
         self.rigid: list[np.ndarray | None] = [None] * len(body_ids)
         self.semidefinite = [False] * len(body_ids)  # W known to be PSD (coupling.py)
         # per body: the span of the impulses its contacts can carry (None: all; coupling.py)

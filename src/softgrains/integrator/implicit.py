@@ -568,31 +568,31 @@ class BodyStep:
         return ImpulseResponse(w, factorization, E, free, X), 0.5 * (W + W.T)
 
     def rigid_modes(self, rows: np.ndarray, sites: sp.spmatrix | None = None) -> np.ndarray:
-        """G (k, d, d + r): the body's rigid modes of inertia alone at its contact sites,
-        scaled so that G_c G_c'ᵀ is their share of the compliance block W_cc' (as
-        :meth:`contact_response`'s, Delassus). A mode g with A g = λ M g is a term
-        g gᵀ/(λ gᵀMg) of A⁻¹, so its share is κ w (H_c g)(H_c' g)ᵀ/(λ gᵀMg). The
-        translations are such modes of every free body (K g = 0, λ = c_m): their share
-        κ w/(c_m m) I = I/m, the velocity an impulse gives the whole body's mass; with the
-        momentum form so are the r rigid rotations (rotations.py; λ gᵀMg their block B):
-        κ w (H_c R) B⁻¹ (H_c' R)ᵀ. Columns of zeros where a mode does not apply; all zero
-        for a body with a prescribed dof (no rigid mode). At quasi-static steps these
-        modes carry nearly all of W_cc (a free disk squeezed at Δt c/h 3000: all but
-        2e-5 of it)."""
+        """G (k, d, d + r): the body's rigid modes of inertia alone at its contact sites
+        (``sites`` H as in :meth:`contact_response`; None: the rows themselves), scaled so
+        that G_c G_c'ᵀ is their share of the compliance block W_cc' (Delassus). A mode g with
+        A g = λ M g is a term g gᵀ/(λ gᵀMg) of A⁻¹, so its share is
+        κ w (H_c g)(H_c' g)ᵀ/(λ gᵀMg). The translations are such modes of every free body
+        (K g = 0, λ = c_m; κ w/(c_m m) = 1/m: an impulse's velocity of the whole mass); with
+        the momentum form so are the r rigid rotations (rotations.py; λ gᵀMg their block B
+        in the Newton matrix last built, so call it after :meth:`contact_response`; before
+        any, their columns are zero). Columns of zeros where a mode does not apply; all zero
+        for a body with a prescribed dof (no rigid mode). At quasi-static steps these modes
+        carry nearly all of W_cc (a free disk squeezed at Δt c/h 3000: all but 2e-5)."""
         d = self.d
         k = rows.size if sites is None else sites.shape[0] // d
         G = np.zeros((k, d, RIGID_MODES[d]))
-        rotations = RIGID_MODES[d] - d
         if self.fixed.any():
             return G
         kappa, _ = self.velocity_affine()
         scale = kappa * self.impulse_weight
-        # the translations: H_c g = e_a (the sites' weights sum to one)
-        G[:, :, :d] = np.eye(d) * np.sqrt(scale / (self.c_m * self.m[:, 0].sum()))
+        translations = np.tile(np.eye(d), (rows.size, 1))  # (rows d, d): g_a at the rows
+        at_sites = translations if sites is None else sites @ translations
+        G[:, :, :d] = at_sites.reshape(k, d, d) * np.sqrt(scale / (self.c_m * self.m[:, 0].sum()))
         if self.momentum_form and self._rotation_block is not None:
             dofs = (rows[:, None] * d + np.arange(d)).ravel()
             R = self._rotations.fields[dofs]
-            at_sites = (R if sites is None else sites @ R).reshape(k, d, rotations)
+            at_sites = (R if sites is None else sites @ R).reshape(k, d, RIGID_MODES[d] - d)
             root = np.linalg.cholesky(np.linalg.inv(self._rotation_block))
             G[:, :, d:] = np.sqrt(scale) * at_sites @ root
         return G
