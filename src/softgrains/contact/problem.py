@@ -361,13 +361,13 @@ def _normal_masses(problem: ContactProblem) -> np.ndarray:
 
 def deformation_masses(problem: ContactProblem) -> np.ndarray:
     """A normal mass per contact that leaves out what its bodies' rigid modes of inertia
-    alone carry (``rigid``): 1/Σ_s Σ_c' |n_c·(W_s − G G ᵀ)_cc'·n_c'|, over each body s the
+    alone carry (``rigid``): 1/Σ_s Σ_c' |n_c·(W_s − G Gᵀ)_cc'·n_c'|, over each body s the
     contact touches and the contacts c' touching s too (a bound on how fast the bodies'
     deformation alone moves the contact under the loads of its neighbours), never below
-    :func:`normal_masses`. At a
-    quasi-static step the rigid modes carry nearly all of W_cc (Δt c/h 3000: all but
-    2e-5 of a free disk's), and 1/W_cc,nn is then the bodies' inertia, not the contact's
-    stiffness (solvers.py tries this scale where the first Newton stalls)."""
+    :func:`normal_masses`. At a quasi-static step the rigid modes carry nearly all of W_cc
+    (Δt c/h 3000: all but 2e-5 of a free disk's), and 1/W_cc,nn is then the bodies'
+    inertia, not the contact's stiffness (solvers.py tries this scale where the first
+    Newton stalls)."""
     return problem._cached("deformation_masses", lambda: _deformation_masses(problem))
 
 
