@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from softgrains.grid.transfers import deformation_increment, matmul
-from softgrains.materials.dispatch import pk1_and_tangent, strain_energy
+from softgrains.materials.dispatch import LINEAR_LAW, pk1_and_tangent, strain_energy
 from softgrains.materials.tensor import determinant, inverse
 from softgrains.threads import parallel_kernel
 
@@ -227,7 +227,7 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
                     for M in range(d):
                         acc += P[i, M] * Fn[a, M]
                     Pv[p, i, a] = scale * acc
-            objective = momentum and law[p] != 1
+            objective = momentum and law[p] != LINEAR_LAW
             if not want_tangent:
                 if objective:
                     momentum_form(dF, Pv, Av, p, False, Finv, S, T)

@@ -69,13 +69,12 @@ from softgrains.integrator.rotations import (
     rotation_stiffness,
     symmetric_factorization,
 )
-from softgrains.materials.dispatch import LAW_CODES
+from softgrains.materials.dispatch import LINEAR_LAW
 from softgrains.threads import threads_for
 
 ACTIVE_MASS_FRACTION = 1e-4  # lighter nodes (fraction of the heaviest point) are removed
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
 CHUNKS_PER_THREAD = 8  # point chunks per thread in the parallel kernels
-LINEAR_LAW = LAW_CODES["linear-elastic"]  # its stress is no push-forward of an objective S
 MAX_LINE_SEARCH = 8  # halvings of a Newton update in the backtracking line search
 RIGID_MODES = {2: 3, 3: 6}  # a body's rigid modes by dimension (translations, rotations)
 
@@ -603,8 +602,7 @@ class BodyStep:
         if self._lu is None:
             if self._A is None:
                 self._A = self._matrix()
-            self._lu = (self._A if isinstance(self._A, DecoupledSparse)
-                        else symmetric_factorization(self._A) if self.momentum_form
+            self._lu = (symmetric_factorization(self._A) if self.momentum_form
                         else factorize(self._A))
         return self._lu
 
@@ -748,7 +746,7 @@ class BodyStep:
         factorization is kept for the contacts' compliance."""
         res, rhs = self.result, -self.r.ravel()
         try:
-            self._lu = A if isinstance(A, DecoupledSparse) else symmetric_factorization(A)
+            self._lu = symmetric_factorization(A)
             du, corrections = corrected_solve(self._exact, self._lu, rhs, self._lu.solve(rhs))
         except (np.linalg.LinAlgError, RuntimeError) as err:
             raise self._solve_failed(err) from err

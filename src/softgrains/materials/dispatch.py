@@ -9,6 +9,9 @@ from numba import njit
 from softgrains.materials import linear_elastic, neo_hookean
 
 LAW_CODES = {"neo-hookean": 0, "linear-elastic": 1}
+# the linear law: geometrically linear, its stress no push-forward of an objective S (the
+# momentum form of the internal forces leaves it out)
+LINEAR_LAW = LAW_CODES["linear-elastic"]
 
 
 def law_code(name: str) -> int:
@@ -29,7 +32,7 @@ def pk1_and_tangent(law, F, lam, mu, P, A, Finv, tangent=True):
 
     P (d×d), A (d×d×d×d) and the scratch Finv (d×d) are filled in place (no allocation).
     """
-    if law == 1:
+    if law == LINEAR_LAW:
         return linear_elastic.pk1_and_tangent(F, lam, mu, P, A, Finv, tangent)
     return neo_hookean.pk1_and_tangent(F, lam, mu, P, A, Finv, tangent)
 
@@ -37,7 +40,7 @@ def pk1_and_tangent(law, F, lam, mu, P, A, Finv, tangent=True):
 @njit(cache=True, inline="always")
 def strain_energy(law, F, lam, mu):
     """Strain energy density W(F) per unit reference volume."""
-    if law == 1:
+    if law == LINEAR_LAW:
         return linear_elastic.strain_energy(F, lam, mu)
     return neo_hookean.strain_energy(F, lam, mu)
 
@@ -51,7 +54,7 @@ def cauchy_stress(law, F, lam, mu, sigma, P, A, Finv):
     d = F.shape[0]
     J = pk1_and_tangent(law, F, lam, mu, P, A, Finv, False)
     sigma[:, :] = 0.0
-    if law == 1:
+    if law == LINEAR_LAW:
         for i in range(d):
             for j in range(d):
                 sigma[i, j] = P[i, j]
