@@ -8,7 +8,12 @@ on the same files, one after the other, 1 thread (issue 11, session 27).
 Problems saved with their warm start and solver options, every solve of a few steps of a
 run: benchmarks/contact_problems_from_run.py (issue 14, session 31).
 
+``--no-retry`` turns off the second try of a stalled solve on the contacts' deformation
+scale (solvers.solve, session 49) to compare with it on the same problems; the last line
+gives the totals: Newton iterations and the solves left above their tolerance (stalled).
+
 Run:  python benchmarks/contact_solve_replay.py FILE.npz ... [--tolerance 1e-6] [--repeat 3]
+                                                [--no-retry]
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from softgrains.contact import solvers
 from softgrains.contact.problem import ContactProblem
 from softgrains.contact.solvers import ContactSolverOptions, solve
 
@@ -44,8 +50,9 @@ def replay(path: Path, tolerance: float | None, repeat: int) -> str:
     matrices = [v for k, v in problem._cache.items() if isinstance(k, tuple)]
     factorizations = sum(getattr(m, "factorizations", 0) for m in matrices)
     updates = sum(getattr(m, "updates", 0) for m in matrices)
-    return (f"| {path.name} | {problem.n_contacts} | {best:.3f} | {result.iterations} | "
-            f"{result.residual:.1e} | {factorizations} | {updates} |")
+    row = (f"| {path.name} | {problem.n_contacts} | {best:.3f} | {result.iterations} | "
+           f"{result.residual:.1e} | {factorizations} | {updates} |")
+    return row, result.iterations, result.residual > options.tolerance
 
 
 def main() -> None:
@@ -54,12 +61,20 @@ def main() -> None:
     parser.add_argument("--tolerance", type=float, default=None,
                         help="instead of the saved options' (default 1e-6 without them)")
     parser.add_argument("--repeat", type=int, default=3)
+    parser.add_argument("--no-retry", action="store_true",
+                        help="no second try of a stalled solve on the deformation scale")
     args = parser.parse_args()
+    if args.no_retry:
+        solvers._rigid_dominated = lambda problem: False
     print("| problem | contacts | s (best) | iterations | residual | factorizations | "
           "row updates |")
     print("| --- | --- | --- | --- | --- | --- | --- |")
+    iterations = stalled = 0
     for path in args.files:
-        print(replay(path, args.tolerance, args.repeat), flush=True)
+        row, its, failed = replay(path, args.tolerance, args.repeat)
+        iterations, stalled = iterations + its, stalled + failed
+        print(row, flush=True)
+    print(f"{len(args.files)} problems: {iterations} Newton iterations, {stalled} stalled")
 
 
 if __name__ == "__main__":
