@@ -162,3 +162,30 @@ def test_the_stiffened_rotation_takes_the_virial_of_the_loads(newton_matrix):
     stresses = np.tile(np.array([[-2.0, 0.3], [0.3, -1.0]]), (5, 1, 1))
     block = rotation_stiffness(rotations, stresses, c_m, 0.5)
     assert block[0, 0] == pytest.approx(c_m * rotations.inertia[0, 0] + 0.5 * 15.0)
+
+
+@pytest.mark.parametrize("settings, expected", [
+    ({}, True),  # the default, stress_form = "auto", at θ = 1
+    ({"stress_form": "consistent"}, False),
+    ({"stress_form": "momentum"}, True),
+    ({"theta": 0.5}, False),  # auto: the momentum form is the θ = 1 step's
+    ({"integrator": "newmark", "mass_matrix": "lumped"}, False),
+])
+def test_the_default_stress_form_is_the_momentum_form_at_theta_one(settings, expected):
+    """stress_form = "auto" (the default since session 50) takes the momentum form where
+    the step is the θ-scheme with θ = 1, and the consistent form otherwise (an explicit
+    "momentum" there is refused: tests/case/test_load.py)."""
+    from softgrains import Simulation, load_case
+    from softgrains.integrator.implicit import BodyStep
+
+    sim = Simulation(load_case({
+        "simulation": {"dt": 1e-3, "steps": 1, **settings},
+        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
+        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [{"name": "disk", "shape": "disk", "center": [1.0, 1.0], "radius": 0.5,
+                    "material": "gel"}],
+        "output": {"progress": False},
+    }))
+    step = BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
+                    np.zeros(2), 1e-3, 0)
+    assert step.momentum_form == expected

@@ -15,9 +15,11 @@ from softgrains.observe.compaction import (
 )
 
 
-def small_compaction(friction=0.0, seeding="rings", passes=None, **protocol):
+def small_compaction(friction=0.0, seeding="rings", passes=None, stress_form="auto",
+                     **protocol):
     return load_case({
-        "simulation": {"dt": 1e-4, "end_time": 0.2, "theta": 1.0, "seed": 3},
+        "simulation": {"dt": 1e-4, "end_time": 0.2, "theta": 1.0, "seed": 3,
+                       "stress_form": stress_form},
         "grid": {"cell_size": 2e-3},
         "materials": {"gel": {"young": 1e7, "poisson": 0.4, "density": 100.0}},
         "sample": {"count": 6, "mean_diameter": 0.01, "polydispersity": 0.2,
@@ -220,14 +222,18 @@ def test_an_overlap_beyond_the_gap_limit_does_not_creep(tmp_path, monkeypatch, l
         assert summary["largest_contact_penetration_h"] > 3 * 0.01
 
 
-def test_frictionless_grains_taken_in_one_pass_do_not_spin_up(tmp_path):
+@pytest.mark.parametrize("stress_form", ["consistent", "auto"])
+def test_frictionless_grains_taken_in_one_pass_do_not_spin_up(tmp_path, stress_form):
     """One pass without friction: a loaded round grain whose kernel surface meets the
     other grain's points is held from turning by nothing but its contacts' levers
-    (contact/levers.py). Without them the θ-step's angular-momentum error spun the large
-    grain up ×1.6–2 a step (2 → 729 rad/s in steps 86–95), its surface inflated and the
-    end-gap corrections poured energy in: measured (session 46) 10 retried steps and
-    correction work 8.4× the walls' work; with them 1 retried step and none."""
-    summary = Simulation(small_compaction(wall_speed=0.5, passes="one"), out=tmp_path).run()
+    (contact/levers.py) with the consistent form. Without them the θ-step's
+    angular-momentum error spun the large grain up ×1.6–2 a step (2 → 729 rad/s in steps
+    86–95), its surface inflated and the end-gap corrections poured energy in: measured
+    (session 46) 10 retried steps and correction work 8.4× the walls' work; with them 1
+    retried step and none. The momentum form (the default, "auto" at θ = 1) has no such
+    error, and its grains take no levers."""
+    summary = Simulation(small_compaction(wall_speed=0.5, passes="one",
+                                          stress_form=stress_form), out=tmp_path).run()
     series = read_table(tmp_path / "series.csv")
     assert summary["status"] == "completed"
     assert summary["retried_steps"] <= 2

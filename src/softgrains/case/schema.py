@@ -111,13 +111,14 @@ class SimulationSettings(_Section):
         "quasi-static steps a snap-through or a spinning rattler moves grains several "
         "cells); when the retry_halvings are spent the run stops. Not checked when the "
         "case has a single body")
-    stress_form: Literal["consistent", "momentum"] = Field(
-        "consistent", description="internal forces of the θ = 1 step: consistent (the "
-        "exact gradient of the strain energy) or momentum (experimental: the end state's "
-        "second Piola–Kirchhoff stress pushed forward by the start-of-step F, whose "
-        "moment about the start nodes vanishes, so that the step keeps a free grain's "
-        "angular momentum and a loaded grain has no spinning solution; θ = 1 only; bodies "
-        "with prescribed nodes and linear-elastic bodies keep the consistent form)")
+    stress_form: Literal["auto", "consistent", "momentum"] = Field(
+        "auto", description="internal forces of the step: consistent (the exact gradient "
+        "of the strain energy) or momentum (the end state's second Piola–Kirchhoff stress "
+        "pushed forward by the start-of-step F, whose moment about the start nodes "
+        "vanishes, so that the θ = 1 step keeps a free grain's angular momentum and a "
+        "loaded grain has no spinning solution; θ = 1 only; bodies with prescribed nodes "
+        "and linear-elastic bodies keep the consistent form); auto: momentum where "
+        "integrator = \"theta\" and theta = 1, else consistent")
     tangent: Literal["auto", "projected", "exact"] = Field(
         "auto", description="Newton matrix: exact (quadratic convergence), per-point "
         "tangents made positive semi-definite (robust under compression, linear "

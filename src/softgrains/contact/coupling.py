@@ -534,8 +534,17 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 or k - tangent_from >= AUTO_TANGENT_ITERATIONS):
             # tangent = "auto": an exact tangent can make W indefinite under compression
             # (the contact problem then has no unique solution) or converge slowly: the
-            # projected tangent from here on (this iteration's directions are dropped)
-            switched = [i for i, b in steps.items() if b.use_projected_tangent()]
+            # projected tangent from here on (this iteration's directions are dropped).
+            # A body of the momentum form has no such negative mode: it stiffens its
+            # rotation (BodyStep.stiffen_rotation) only where the loop is slow, not after
+            # failed solves (session 50: on the frictionless quasi-static squeeze at D/h 20
+            # and 0.025 h a step, solves failing on the redundant wall sites' nearly
+            # singular W stiffened it, and the next try's rotation then diverged, ×−3 an
+            # iteration, until the run stopped; the rotation's ill-conditioned compliance
+            # is the deformation-scale retry's, solvers.solve)
+            slow = k - tangent_from >= AUTO_TANGENT_ITERATIONS
+            switched = [i for i, b in steps.items()
+                        if (slow or not b.momentum_form) and b.use_projected_tangent()]
             if switched:
                 # (a body of the momentum form stiffens its rotations instead: the switch
                 # gets as many iterations and failed solves before the next one)

@@ -93,7 +93,7 @@ class IntegratorSettings:
     max_iterations: int = 25
     linear_solver: str = "auto"
     tangent: str = "auto"  # "auto" (exact, projected when it fails) | "exact" | "projected"
-    stress_form: str = "consistent"  # "consistent" (V⁰ P Fⁿᵀ) | "momentum" (θ = 1: V⁰ Fⁿ S Fⁿᵀ)
+    stress_form: str = "auto"  # "consistent" (V⁰ P Fⁿᵀ) | "momentum" (θ = 1: V⁰ Fⁿ S Fⁿᵀ) | "auto"
 
 
 @dataclass(frozen=True)
@@ -300,7 +300,7 @@ class BodyStep:
         # body's supports take its moment) of objective laws (the linear law's stress is
         # no push-forward)
         self.momentum_form = bool(
-            st.stress_form == "momentum" and not self.newmark and st.theta == 1.0
+            st.stress_form in ("momentum", "auto") and not self.newmark and st.theta == 1.0
             and not fixed.any() and np.all(pts.law != LINEAR_LAW))
         v_n[fixed] = vbar[fixed]
         a_n[fixed] = 0.0
@@ -399,8 +399,9 @@ class BodyStep:
         """With the momentum form and ``tangent = "auto"``: from now on in this step the
         Newton matrix's rigid rotations take the stiffness of rotations.rotation_stiffness
         (the residual, and so the solution, unchanged): the auto tangent's remedy when
-        the contact solves fail or the loop takes many iterations, where the rotations'
-        inertia alone leaves their compliance ill-conditioned. The only one: the projected
+        the loop takes many iterations (coupling: since session 50 not after failed
+        solves), where the rotations' inertia alone leaves their compliance
+        ill-conditioned. The only one: the projected
         tangent made things worse (session 48: 40 iterations without convergence on the
         frictional squeeze). Its trade-off (docs/dev-notes.md, next step 0(a)): the
         frictionless D/h 10 squeeze 5.2 / 12 coupling iterations with it, 7.7 / 47
