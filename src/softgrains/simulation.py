@@ -502,16 +502,19 @@ class Simulation:
                          self.state.time, out / CHECKPOINT_NAME)
                 for change in changes:
                     log.warning("case changed since the checkpoint: %s", change)
+            settings = self.model.integrator
             log.info("softgrains run: %d bodies, %d points, %d steps of dt = %g s, "
-                     "integrator %s", len(self.model.bodies), self.model.n_points,
-                     self.n_steps, self.dt, self.model.integrator.kind)
+                     "integrator %s, %s stress form", len(self.model.bodies),
+                     self.model.n_points, self.n_steps, self.dt, settings.kind,
+                     "momentum" if settings.momentum_form else "consistent")
             if self._frictionless_one_pass():
                 log.warning("[contact] grain_passes = \"one\" on frictionless grain pairs is "
-                            "experimental: it holds loaded grains (the surface sides' "
-                            "levers), but on the frictionless example its loaded contacts "
-                            "reach the gap limit (0.040 h against 0.027 h with two "
-                            "passes); \"auto\" (the default) takes two passes there "
-                            "(docs/dev-notes.md, #11 next step 000)")
+                            "experimental: it holds loaded grains (the momentum form, or "
+                            "with the consistent form the surface sides' levers), but "
+                            "with the consistent form its loaded contacts reached the gap "
+                            "limit on the frictionless example (0.040 h against 0.027 h "
+                            "with two passes); \"auto\" (the default) takes two passes "
+                            "there (docs/dev-notes.md, #11 next steps)")
 
         def record(wall):
             row = self.series_row(wall + wall_offset)

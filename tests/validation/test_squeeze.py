@@ -233,8 +233,9 @@ def test_the_momentum_form_squeezes_quasi_statically_in_a_few_iterations():
 def test_the_quasi_static_squeeze_in_small_steps_runs_to_its_end():
     """#11 item 1 at the default settings on the frictionless quasi-static squeeze (D/h 20,
     Δt c/h 3000) with the plates closing 0.025 h a step, to 15% of D (60 steps): every
-    step converges (some at Δt/2: measured 2026-12-07, 5 retried; the consistent form 7 over
-    the 30% run) and the force follows the reference within D10's bar. Until session 50
+    step converges (some at Δt/2: measured 2026-12-07, 3 retried here, 5 over the whole
+    30% run; the consistent form retried 7 over that run) and the force follows the
+    reference within D10's bar. Until session 50
     the run stopped at step 51: its contact solves failed on the redundant wall sites'
     nearly singular W, that stiffened the disk's rotation (BodyStep.stiffen_rotation), and
     the retry's rotation diverged (×−3 an iteration) past the motion limit; the momentum

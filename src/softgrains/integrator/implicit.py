@@ -95,6 +95,14 @@ class IntegratorSettings:
     tangent: str = "auto"  # "auto" (exact, projected when it fails) | "exact" | "projected"
     stress_form: str = "auto"  # "consistent" (V⁰ P Fⁿᵀ) | "momentum" (θ = 1: V⁰ Fⁿ S Fⁿᵀ) | "auto"
 
+    @property
+    def momentum_form(self) -> bool:
+        """Whether free bodies of objective laws take the momentum form: stress_form
+        "momentum" or "auto" with the θ-scheme at θ = 1 (the only step whose angular
+        momentum balance it serves)."""
+        return (self.stress_form in ("momentum", "auto") and self.kind == "theta"
+                and self.theta == 1.0)
+
 
 @dataclass(frozen=True)
 class DirichletBox:
@@ -300,8 +308,7 @@ class BodyStep:
         # body's supports take its moment) of objective laws (the linear law's stress is
         # no push-forward)
         self.momentum_form = bool(
-            st.stress_form in ("momentum", "auto") and not self.newmark and st.theta == 1.0
-            and not fixed.any() and np.all(pts.law != LINEAR_LAW))
+            st.momentum_form and not fixed.any() and np.all(pts.law != LINEAR_LAW))
         v_n[fixed] = vbar[fixed]
         a_n[fixed] = 0.0
         if not self.consistent:
@@ -380,8 +387,11 @@ class BodyStep:
         return self.settings.tangent == "projected" or self._projected
 
     def can_project(self) -> bool:
-        """Whether :meth:`use_projected_tangent` would switch (``auto``, still exact)."""
-        return self.settings.tangent == "auto" and not self._projected
+        """Whether :meth:`use_projected_tangent` would switch (``auto``, still exact; with
+        the momentum form: its rotation not stiffened yet)."""
+        if self.settings.tangent != "auto" or self._projected:
+            return False
+        return not (self.momentum_form and self._stiff_rotation)
 
     def use_projected_tangent(self) -> bool:
         """With ``tangent = "auto"``, switch to the projected tangent for the rest of the
@@ -408,7 +418,7 @@ class BodyStep:
         without; on the frictional one the body's step then leaves the torque residual
         (the defect correction's ratio 1 − c_m I/B ≈ 1), which alternates and grows, one
         step retried with it or without (session 49). True if it switched."""
-        if not self.momentum_form or self._stiff_rotation or not self.can_project():
+        if not self.momentum_form or not self.can_project():
             return False
         self._stiff_rotation = True
         self._A = self._lu = None
