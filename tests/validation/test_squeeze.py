@@ -269,7 +269,7 @@ def test_the_momentum_form_squeezes_between_frictional_plates_without_a_retried_
     contacts' deformation scale (solvers.solve, problem.deformation_masses). Measured
     (2026-12-07): 3.1 coupling iterations a step on average, 5 at most, no step retried;
     without the retry 2 steps retried (53 steps against 30). At D/h 10 one step is still
-    retried: the coupled loop's rotation, not a solve (docs/dev-notes.md, next step 0(a))."""
+    retried: the coupled loop's rotation, not a solve (docs/dev-notes.md, #11 next step 2)."""
     from softgrains.contact import solvers
 
     bench = _benchmark()

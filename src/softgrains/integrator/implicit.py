@@ -413,7 +413,7 @@ class BodyStep:
         solves), where the rotations' inertia alone leaves their compliance
         ill-conditioned. The only one: the projected
         tangent made things worse (session 48: 40 iterations without convergence on the
-        frictional squeeze). Its trade-off (docs/dev-notes.md, next step 0(a)): the
+        frictional squeeze). Its trade-off (docs/dev-notes.md, #11 next step 2): the
         frictionless D/h 10 squeeze 5.2 / 12 coupling iterations with it, 7.7 / 47
         without; on the frictional one the body's step then leaves the torque residual
         (the defect correction's ratio 1 − c_m I/B ≈ 1), which alternates and grows, one
