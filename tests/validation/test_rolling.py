@@ -16,11 +16,13 @@ The tilted motion is stepped at ROLL_DT = 1.25 ms. The default stress form ("mom
 its stress is pushed forward by the start-of-step F, docs/theory.md) lags the disk's
 rotation by ωΔt a step, which acts as a rolling resistance of about ωΔt × the normal
 force: at 5 ms the wall's D/h 20 rolling a is 3.1% low against 2.0% at 0.625 ms (the
-consistent form's 1.6% and 1.8%); at 1.25 ms both forms are within 0.4% of their 0.625-ms
-values.
+consistent form's 1.6% and 1.8%). At 1.25 ms the momentum form's rates are within 0.25%
+(rolling a) and 0.5% (spin-up) of their 0.625-ms values, the consistent form's within
+0.4% and 1.1%.
 
 What h does (measured 2026-12-07, settled, 1.25 ms, the momentum form; the consistent
-form's in brackets; at 0.625 ms both forms agree within 0.4% at D/h 20): the disk's points
+form's in brackets; at 0.625 ms the two forms agree within 0.2% (rolling a) and 0.6%
+(spin-up) at D/h 20): the disk's points
 form a polygon, and a contact one or two sites wide resists turning it (a cogging torque
 that vanishes as the sites per contact grow); the transfers' dissipation adds to it (wall,
 D/h 10, μ 0.05: R dω/dt at 82% of the analytic rate with FLIP, 4% with PIC).
