@@ -46,12 +46,14 @@ def _benchmark():
     return module
 
 
-def _squeeze(d_over_h: int, dt_c_over_h: float) -> tuple[Simulation, np.ndarray, list]:
-    """The squeeze run to 30%: the simulation, the plate force's relative error against the
-    reference over 5–30% of D, and the points' penetration past the plates (cells) at the
-    end of every step."""
+def _squeeze(d_over_h: int, dt_c_over_h: float, travel: float = 0.1, end: float = 0.30
+             ) -> tuple[Simulation, np.ndarray, list]:
+    """The squeeze run to ``end`` × D (plates closing ``travel`` h a step each): the
+    simulation, the plate force's relative error against the reference over 5% of D to
+    that strain, and the points' penetration past the plates (cells) at the end of every
+    step."""
     bench = _benchmark()
-    sim = Simulation(load_case(bench.squeeze_case(d_over_h, dt_c_over_h, 0.1)))
+    sim = Simulation(load_case(bench.squeeze_case(d_over_h, dt_c_over_h, travel, strain=end)))
     h = sim.model.lattice.h
     strain, force, inside = [], [], []
     while not sim.at_end:  # (a step whose coupled solve fails is retried shorter or stops)
@@ -62,8 +64,8 @@ def _squeeze(d_over_h: int, dt_c_over_h: float) -> tuple[Simulation, np.ndarray,
         inside.append(bench.penetration(sim, h))
     reference = np.loadtxt(bench.REFERENCE, delimiter=",", skiprows=1)
     strain, force = np.array(strain), np.array(force)
-    assert strain[-1] == pytest.approx(0.30, abs=1e-9)
-    window = (strain >= 0.05 - 1e-9) & (strain <= 0.30 + 1e-9)
+    assert strain[-1] == pytest.approx(end, abs=1e-9)
+    window = (strain >= 0.05 - 1e-9) & (strain <= end + 1e-9)
     error = force[window] / np.interp(strain[window], reference[:, 0], reference[:, 1]) - 1.0
     return sim, error, inside
 
@@ -240,22 +242,9 @@ def test_the_quasi_static_squeeze_in_small_steps_runs_to_its_end():
     nearly singular W, that stiffened the disk's rotation (BodyStep.stiffen_rotation), and
     the retry's rotation diverged (×−3 an iteration) past the motion limit; the momentum
     form now stiffens it only where the loop is slow (coupling.solve_coupled)."""
-    bench = _benchmark()
-    sim = Simulation(load_case(bench.squeeze_case(20, 3000.0, 0.025, strain=0.15)))
-    h = sim.model.lattice.h
-    strain, force = [], []
-    while not sim.at_end:
-        diag = sim.step()
-        offset = sim.state.body_offset
-        strain.append((offset[1][1] - offset[2][1]) / (2 * bench.R))
-        force.append(diag.contact_forces(3, 2, sim.last_dt)[2, 1] / (bench.E * bench.R))
-    assert strain[-1] == pytest.approx(0.15, abs=1e-9)
-    reference = np.loadtxt(bench.REFERENCE, delimiter=",", skiprows=1)
-    strain, force = np.array(strain), np.array(force)
-    window = strain >= 0.05 - 1e-9
-    error = force[window] / np.interp(strain[window], reference[:, 0], reference[:, 1]) - 1.0
+    sim, error, _ = _squeeze(20, 3000.0, travel=0.025, end=0.15)
     assert np.abs(error).max() < BAR, np.round(error, 4)
-    assert sim.largest_penetration < 0.05 * h
+    assert sim.largest_penetration < 0.05 * sim.model.lattice.h
 
 
 def test_the_momentum_form_squeezes_between_frictional_plates_without_a_retried_step(

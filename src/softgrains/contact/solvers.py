@@ -188,11 +188,8 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     # 6% and 14% more Newton iterations; with that scale alone 17 of the latter stalled)
     again = _newton_then_fallbacks(problem, P, replace(options, deformation_scale=True),
                                    polish)
-    best = again if again.residual < result.residual else result
     gains = [g for g in (result.fallback_gain, again.fallback_gain) if g is not None]
-    return replace(best, iterations=result.iterations + again.iterations,
-                   warmup=result.warmup, history=result.history + again.history,
-                   fallback_gain=min(gains) if gains else None)
+    return replace(_better(result, again), fallback_gain=min(gains) if gains else None)
 
 
 def _accepted(result: ContactResult, options: ContactSolverOptions) -> bool:
