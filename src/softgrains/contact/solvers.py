@@ -25,8 +25,11 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   the Tresca problem (monotone for a symmetric PSD W) solved by the same Newton, s
   updated with Anderson mixing; then the **proximal point** loop (W + εI, well posed where
   redundant sites make W singular), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps
-  from the best iterate (without friction, or on an indefinite W, the sweeps come before
-  the proximal point, as they all did before session 26). Every Newton starts from
+  from the best iterate (on an indefinite W the sweeps come before the proximal point, as
+  they all did before session 26). Without friction on a PSD W the first fallback is the
+  **interior point** (interior_point.py: the convex QP's primal-dual path, whose systems
+  stay definite where redundant sites make W singular and stall the Newton's active
+  sets; session 51), then the sweeps, then the proximal point. Every Newton starts from
   WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess. The result's
   ``fallback_gain`` says what the fallbacks gained over the stalled Newton.
   Dimension-generic (the 3D cone's projection is exact).
@@ -43,6 +46,7 @@ import numpy as np
 from softgrains.contact.alart_curnier import linearise
 from softgrains.contact.delassus import BlockRows, product
 from softgrains.contact.gauss_seidel import gauss_seidel
+from softgrains.contact.interior_point import interior_point
 from softgrains.contact.local_law import OPEN, SLIP, STICK
 from softgrains.contact.newton_matrix import NewtonMatrix
 from softgrains.contact.problem import (
@@ -226,7 +230,8 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
                options: ContactSolverOptions, frictional: bool) -> ContactResult:
     """The fallbacks of a stalled Newton (``result``, started from P): with friction the
     Tresca fixed point, the proximal point, then patient Gauss–Seidel sweeps; without, the
-    sweeps, then the proximal point. Returns the best iterate of all."""
+    interior point (on a PSD W), the sweeps, then the proximal point. Returns the best
+    iterate of all."""
     start = P  # where the fixed-point fallbacks start
     if frictional:
         # the Alart–Curnier Newton has no global convergence with Coulomb friction (dense
@@ -267,11 +272,31 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
         return _better(best, _sweeps(problem, best.impulse, options, NSGS_FALLBACK_SWEEPS,
                                      _Patience() if frictional else None))
 
-    for stage in (proximal, sweeps) if frictional else (sweeps, proximal):
+    def interior(best: ContactResult) -> ContactResult:
+        # (frictionless on a PSD W: an exact method for the convex QP, whose iterations
+        # do not stall on a singular W as the Newton's active sets do; session 51)
+        found = interior_point(problem, options.tolerance, options.floor)
+        return _better(best, ContactResult(
+            found.impulse, contact_status(problem, found.impulse), found.iterations,
+            found.residual, found.residual <= options.tolerance, found.history))
+
+    if frictional:
+        stages = (proximal, sweeps)
+    elif _interior_point_applies(problem, options):
+        stages = (interior, sweeps, proximal)
+    else:
+        stages = (sweeps, proximal)
+    for stage in stages:
         result = stage(result)
         if result.converged or result.residual <= options.acceptable:
             break
     return result
+
+
+def _interior_point_applies(problem: ContactProblem, options: ContactSolverOptions) -> bool:
+    """Whether the problem is the convex QP the interior point solves: no friction, W
+    PSD (``options.tresca``: the coupling loop's word for a symmetric PSD W)."""
+    return options.tresca and not np.any(problem.mu > 0.0)
 
 
 def _sweeps(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,

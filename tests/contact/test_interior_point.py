@@ -1,0 +1,134 @@
+"""The interior point method for frictionless contact problems (contact/interior_point.py),
+on problems whose Delassus operator is singular: against the exact solution of a rigid
+block landing on redundant wall sites, against an independent active-set solver of the
+same convex QP (SciPy's NNLS), and on the saved problems where every other stage of the
+solve stalls."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import nnls
+
+from softgrains.contact import solvers
+from softgrains.contact.interior_point import interior_point
+from softgrains.contact.problem import ContactProblem, residual_norm
+from softgrains.contact.solvers import ContactSolverOptions, solve
+
+BENCHMARK_DATA = Path(__file__).resolve().parents[2] / "benchmarks" / "data"
+
+
+def _wall_problem(W: np.ndarray, V_free: np.ndarray) -> ContactProblem:
+    """n contacts of one body (rows 0..n−1, compliance W (2n × 2n)) on a fixed wall below
+    it (normals e_y), without friction."""
+    n = V_free.shape[0]
+    return ContactProblem(
+        normal=np.tile([0.0, 1.0], (n, 1)), bias=np.zeros(n), mu=np.zeros(n),
+        a_slot=np.zeros(n, np.int64), a_col=np.arange(n, dtype=np.int64),
+        b_slot=-np.ones(n, np.int64), b_col=np.zeros(n, np.int64),
+        wall_va=np.zeros((n, 2)), wall_vb=np.zeros((n, 2)),
+        k_off=np.zeros(1, np.int64), k_size=np.array([n], np.int64),
+        w_off=np.zeros(1, np.int64), W=W.ravel().copy(), V_free=V_free.copy())
+
+
+def _rigid_block(mass, inertia, sites, velocity, spin):
+    """A rigid block (``mass``, ``inertia`` about its centre) whose flat face, at the
+    centre's height, touches the wall at ``sites`` (x from the centre), moving down at
+    ``velocity`` and spinning at ``spin``: W_s = G Gᵀ with G's columns the block's rigid
+    modes (x, y translation, rotation) per unit mass, rank 3 whatever the sites' number."""
+    n = sites.size
+    G = np.zeros((n, 2, 3))
+    G[:, 0, 0] = G[:, 1, 1] = 1.0 / np.sqrt(mass)
+    G[:, 1, 2] = sites / np.sqrt(inertia)
+    G = G.reshape(2 * n, 3)
+    V_free = np.zeros((n, 2))
+    V_free[:, 1] = -velocity + spin * sites
+    return _wall_problem(G @ G.T, V_free)
+
+
+@pytest.mark.parametrize("velocity, spin, spun", [(1.0, 0.3, False), (0.2, 1.0, True)])
+def test_a_rigid_block_lands_on_redundant_wall_sites(velocity, spin, spun):
+    """Five sites along the face (x = −2 … 2) and three rigid modes: W of rank 3 of 10.
+    The block's velocity after the inelastic landing is the projection, in the kinetic
+    metric (mass 1, inertia 1), of (v, ω) = (−velocity, spin) onto the admissible cone
+    {v_y + ω x ≥ 0 at every site} = {v_y ≥ 2|ω|}. Falling fast and spinning slowly it
+    stops (0, 0); its impulses are then not unique (any P ≥ 0 with ΣP = velocity,
+    Σ P x = −spin): only their sums are checked. Spinning fast it rolls onto its left end:
+    (0.2, 1) projects onto the ray (2, 1): (v, ω) = (0.24, 0.12), the one site at x = −2
+    taking P = 0.44."""
+    sites = np.linspace(-2.0, 2.0, 5)
+    problem = _rigid_block(1.0, 1.0, sites, velocity, spin)
+    result = interior_point(problem, 1e-10)
+    assert result.residual <= 1e-10
+    P = result.impulse[:, 1]
+    assert P.min() >= 0.0 and np.all(result.impulse[:, 0] == 0.0)
+    v_y = -velocity + P.sum()
+    omega = spin + (P * sites).sum()
+    if spun:
+        assert (v_y, omega) == pytest.approx((0.24, 0.12), abs=1e-9)
+        assert P == pytest.approx([0.44, 0, 0, 0, 0], abs=1e-9)
+    else:
+        assert (v_y, omega) == pytest.approx((0.0, 0.0), abs=1e-9)
+    gap_rate = problem.velocities(result.impulse)[:, 1]
+    assert gap_rate == pytest.approx(v_y + omega * sites, abs=1e-12)
+    assert gap_rate.min() >= -1e-9
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_interior_point_agrees_with_an_active_set_nnls_solver(seed):
+    """A random frictionless problem with M = W_nn = AᵀA of rank 8 on 20 contacts and
+    free normal velocities c = Aᵀb: the LCP is the optimality condition of
+    min ½‖A x + b‖² over x ≥ 0, which SciPy's NNLS (Lawson–Hanson active set) solves
+    exactly. The velocities y = M x + c are unique (x is not, M being singular): the two
+    solvers' must agree."""
+    rng = np.random.default_rng(seed)
+    n, rank = 20, 8
+    A = rng.normal(size=(rank, n))
+    b = rng.normal(size=rank)
+    W = np.zeros((2 * n, 2 * n))
+    W[1::2, 1::2] = A.T @ A
+    W[0::2, 0::2] = np.eye(n)  # the tangential components (no friction: no impulse)
+    V_free = np.zeros((n, 2))
+    V_free[:, 1] = A.T @ b
+    problem = _wall_problem(W, V_free)
+    result = interior_point(problem, 1e-10)
+    assert result.residual <= 1e-10
+    x_ref, _ = nnls(A, -b)
+    y_ref = A.T @ (A @ x_ref + b)
+    y = problem.velocities(result.impulse)[:, 1]
+    assert y == pytest.approx(y_ref, abs=1e-8 * np.abs(V_free).max())
+    assert result.iterations <= 30
+
+
+@pytest.mark.parametrize("name", ["redundant_wall_sites_step.npz",
+                                  "redundant_wall_sites_step_dt16.npz"])
+def test_redundant_wall_sites_that_stall_every_other_stage_are_solved(name, monkeypatch):
+    """The two saved frictionless problems of the quasi-static squeeze (D/h 20, plates
+    closing 0.025 h a step, step 52 at Δt and at Δt/16, session 50; 67 / 70 wall sites, W
+    of rank 46–49): with their warm starts and the coupling loop's options, the Newton, the
+    sweeps and the proximal point stalled at 1.3e-3 / 1.1e-4 (1268 / 1090 Newton
+    iterations, measured). The interior point, the first fallback of a stalled
+    frictionless Newton since session 51, meets the tolerance in ~20 iterations."""
+    path = BENCHMARK_DATA / name
+    with np.load(path) as data:
+        start = data["warm_start"]
+        saved = {f: data[f"option_{f}"].item() for f in
+                 ("tolerance", "max_iterations", "floor", "tresca", "fallbacks", "acceptable",
+                  "warmup")}
+    options = ContactSolverOptions(**saved)
+    problem = ContactProblem.load(path)
+    result = solve(problem, start, options)
+    assert result.converged
+    assert residual_norm(problem, result.impulse, floor=options.floor) <= options.tolerance
+    assert result.iterations <= 100  # Newton and interior-point iterations
+    # without the interior point the solve stalls (what it is for)
+    monkeypatch.setattr(solvers, "_interior_point_applies", lambda problem, options: False)
+    stalled = solve(ContactProblem.load(path), start, options)
+    assert not stalled.converged and stalled.residual > 10 * options.tolerance
+
+
+def test_the_interior_point_refuses_friction():
+    problem = _rigid_block(1.0, 1.0, np.linspace(-1.0, 1.0, 3), 1.0, 0.0)
+    problem.mu = np.full(3, 0.5)
+    with pytest.raises(ValueError, match="frictionless"):
+        interior_point(problem, 1e-8)
