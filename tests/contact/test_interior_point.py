@@ -1,14 +1,15 @@
-"""The interior point method for frictionless contact problems (contact/interior_point.py),
-on problems whose Delassus operator is singular: against the exact solution of a rigid
-block landing on redundant wall sites, against an independent active-set solver of the
-same convex QP (SciPy's NNLS), and on the saved problems where every other stage of the
-solve stalls."""
+"""The interior point method for the contact problems that are convex QPs
+(contact/interior_point.py: frictionless, and Tresca's fixed friction bound in 2D), on
+problems whose Delassus operator is singular: against the exact solutions of a rigid block
+landing (and sliding) on redundant wall sites, against independent active-set solvers of
+the same QPs (SciPy's NNLS and bounded least squares), and on the saved problems where
+every other stage of the solve stalls."""
 
 from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy.optimize import nnls
+from scipy.optimize import lsq_linear, nnls
 
 from softgrains.contact import solvers
 from softgrains.contact.interior_point import interior_point
@@ -16,6 +17,7 @@ from softgrains.contact.problem import ContactProblem, residual_norm
 from softgrains.contact.solvers import ContactSolverOptions, solve
 
 BENCHMARK_DATA = Path(__file__).resolve().parents[2] / "benchmarks" / "data"
+DATA = Path(__file__).resolve().parent / "data"
 
 
 def _wall_problem(W: np.ndarray, V_free: np.ndarray) -> ContactProblem:
@@ -72,6 +74,59 @@ def test_a_rigid_block_lands_on_redundant_wall_sites(velocity, spin, spun):
     gap_rate = problem.velocities(result.impulse)[:, 1]
     assert gap_rate == pytest.approx(v_y + omega * sites, abs=1e-12)
     assert gap_rate.min() >= -1e-9
+
+
+@pytest.mark.parametrize("velocity, sticks", [(0.3, True), (2.0, False)])
+def test_a_rigid_block_slides_on_redundant_wall_sites_under_a_tresca_bound(velocity, sticks):
+    """The block of the landing test (mass 2, inertia 1, five sites at the centre's
+    height: a tangential impulse gives no torque), falling at 1 and moving sideways at
+    ``velocity``, with the friction bound s = 0.2 at every site (Σ s = 1): it stops
+    sideways where m |v_t| = 2 × 0.3 < Σ s (impulses not unique: their sum is −0.6), else
+    it slides on at v_t − Σ s/m = 2 − 0.5 = 1.5 with every site at its bound, −0.2."""
+    sites = np.linspace(-2.0, 2.0, 5)
+    problem = _rigid_block(2.0, 1.0, sites, 1.0, 0.0)
+    problem.V_free[:, 0] = velocity
+    problem.mu = np.full(5, 0.5)  # (not read: the bound is held)
+    bound = np.full(5, 0.2)
+    result = interior_point(problem, 1e-10, bound=bound)
+    assert result.residual <= 1e-10
+    P = result.impulse
+    assert np.all(np.abs(P[:, 0]) <= bound + 1e-12)
+    v_t = velocity + P[:, 0].sum() / 2.0
+    assert (-1.0 + P[:, 1].sum() / 2.0) == pytest.approx(0.0, abs=1e-9)  # landed
+    if sticks:
+        assert v_t == pytest.approx(0.0, abs=1e-9)
+    else:
+        assert v_t == pytest.approx(1.5, abs=1e-9)
+        assert P[:, 0] == pytest.approx(np.full(5, -0.2), abs=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_tresca_interior_point_agrees_with_bounded_least_squares(seed):
+    """A random 2D problem with W = AᵀA of rank 24 on 20 contacts (40 components), free
+    velocities q = Aᵀb and friction bounds s: the Tresca problem is the optimality
+    condition of min ½‖A r + b‖² over r_n ≥ 0, |r_t| ≤ s (local frames = global here),
+    which SciPy's bounded least squares (BVLS, an active-set method) solves exactly. The
+    velocities W r + q are unique: the two must agree."""
+    rng = np.random.default_rng(seed)
+    n, rank = 20, 24
+    A = rng.normal(size=(rank, 2 * n))
+    b = rng.normal(size=rank)
+    bound = rng.uniform(0.0, 0.3, size=n)
+    problem = _wall_problem(A.T @ A, (A.T @ b).reshape(n, 2)[:, ::-1].copy())
+    # (the wall's frames have the normal e_y first: swap so that W and q are in them)
+    perm = np.arange(2 * n).reshape(n, 2)[:, ::-1].ravel()
+    problem.W = (A.T @ A)[np.ix_(perm, perm)].ravel().copy()
+    problem.mu = np.full(n, 0.5)
+    result = interior_point(problem, 1e-10, bound=bound)
+    assert result.residual <= 1e-10
+    lower = np.ravel(np.column_stack((np.zeros(n), -bound)))  # (r_n, r_t) per contact
+    upper = np.ravel(np.column_stack((np.full(n, np.inf), bound)))
+    reference = lsq_linear(A, -b, bounds=(lower, upper), method="bvls", tol=1e-14).x
+    w_ref = (A.T @ (A @ reference + b)).reshape(n, 2)
+    w = problem.velocities(result.impulse)  # global (x, y) = (t, n)
+    assert w[:, 1] == pytest.approx(w_ref[:, 0], abs=1e-8 * np.abs(w_ref).max())
+    assert w[:, 0] == pytest.approx(w_ref[:, 1], abs=1e-8 * np.abs(w_ref).max())
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -132,3 +187,30 @@ def test_the_interior_point_refuses_friction():
     problem.mu = np.full(3, 0.5)
     with pytest.raises(ValueError, match="frictionless"):
         interior_point(problem, 1e-8)
+
+
+def test_frictional_redundant_wall_sites_are_solved_by_the_tresca_interior_point(
+        monkeypatch):
+    """frictional_redundant_wall_sites.npz: 48 contacts of the quasi-static squeeze between
+    μ = 0.5 plates (D/h 20, plates closing 0.05 h a step, Δt c/h 3000; a coupling
+    iteration of step 8, session 51), with its warm start and the loop's options
+    (tolerance 1.3e-5). The Coulomb Newton, the Tresca fixed point on the Newton, the
+    proximal point and the sweeps stalled at 6.0e-4 after 446 Newton iterations, on the
+    normal masses and on the deformation scale (measured); the Tresca fixed point whose
+    Tresca problems the interior point solves (after the proximal point) meets it:
+    3.3e-8 (measured)."""
+    path = DATA / "frictional_redundant_wall_sites.npz"
+    with np.load(path) as data:
+        start = data["warm_start"]
+        saved = {f: data[f"option_{f}"].item() for f in
+                 ("tolerance", "max_iterations", "floor", "tresca", "fallbacks", "acceptable",
+                  "warmup")}
+    options = ContactSolverOptions(**saved)
+    problem = ContactProblem.load(path)
+    assert problem.mu.min() > 0.0
+    result = solve(problem, start, options)
+    assert result.converged
+    assert residual_norm(problem, result.impulse, floor=options.floor) <= options.tolerance
+    monkeypatch.setattr(solvers, "_tresca_interior_applies", lambda problem: False)
+    stalled = solve(ContactProblem.load(path), start, options)
+    assert not stalled.converged and stalled.residual > 10 * options.tolerance

@@ -24,8 +24,9 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   iterate (or from its start, where that was better): the friction bound s = μ P_n held,
   the Tresca problem (monotone for a symmetric PSD W) solved by the same Newton, s
   updated with Anderson mixing; then the **proximal point** loop (W + εI, well posed where
-  redundant sites make W singular), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps
-  from the best iterate (on an indefinite W the sweeps come before the proximal point, as
+  redundant sites make W singular), then (2D) the Tresca fixed point again with its
+  Tresca problems solved by the **interior point** (interior_point.py: box QPs; session
+  51), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps from the best iterate (on an indefinite W the sweeps come before the proximal point, as
   they all did before session 26). Without friction on a PSD W the first fallback is the
   **interior point** (interior_point.py: the convex QP's primal-dual path, whose systems
   stay definite where redundant sites make W singular and stall the Newton's active
@@ -229,9 +230,9 @@ def _rigid_dominated(problem: ContactProblem) -> bool:
 def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
                options: ContactSolverOptions, frictional: bool) -> ContactResult:
     """The fallbacks of a stalled Newton (``result``, started from P): with friction the
-    Tresca fixed point, the proximal point, then patient Gauss–Seidel sweeps; without, the
-    interior point (on a PSD W), the sweeps, then the proximal point. Returns the best
-    iterate of all."""
+    Tresca fixed point, the proximal point, the Tresca fixed point on the interior point
+    (2D), then patient Gauss–Seidel sweeps; without, the interior point (on a PSD W), the
+    sweeps, then the proximal point. Returns the best iterate of all."""
     start = P  # where the fixed-point fallbacks start
     if frictional:
         # the Alart–Curnier Newton has no global convergence with Coulomb friction (dense
@@ -275,13 +276,22 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
     def interior(best: ContactResult) -> ContactResult:
         # (frictionless on a PSD W: an exact method for the convex QP, whose iterations
         # do not stall on a singular W as the Newton's active sets do; session 51)
-        found = interior_point(problem, options.tolerance, options.floor)
-        return _better(best, ContactResult(
-            found.impulse, contact_status(problem, found.impulse), found.iterations,
-            found.residual, found.residual <= options.tolerance, found.history))
+        return _better(best, _interior_point(problem, options.tolerance, options.floor))
+
+    def tresca_interior(best: ContactResult) -> ContactResult:
+        # (2D: the Tresca problems are box QPs, solved by the interior point, whose systems
+        # stay definite where redundant sites stall the Tresca Newton and the proximal
+        # point ran out of budget; session 51: on the frictional quasi-static squeeze at
+        # D/h 20 and 0.05 h a step, failed solves 26 -> 1, retried steps 3 -> 0. After the
+        # proximal point, not before: on the frictional example the few solves the
+        # proximal point finishes it did not, and cost 0.4 s where it ran first)
+        if not _tresca_interior_applies(problem):
+            return best
+        return _better(best, _tresca_fixed_point(problem, start, options,
+                                                 FALLBACK_NEWTON_BUDGET, interior=True))
 
     if frictional:
-        stages = (proximal, sweeps)
+        stages = (proximal, tresca_interior, sweeps)
     elif _interior_point_applies(problem, options):
         stages = (interior, sweeps, proximal)
     else:
@@ -293,10 +303,26 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
     return result
 
 
+def _interior_point(problem: ContactProblem, tolerance: float, floor: float,
+                    bound: np.ndarray | None = None) -> ContactResult:
+    """interior_point.py's solve of the frictionless problem (or of the Tresca problem of
+    the friction ``bound``) as a ContactResult."""
+    found = interior_point(problem, tolerance, floor, bound)
+    return ContactResult(found.impulse, contact_status(problem, found.impulse),
+                         found.iterations, found.residual, found.residual <= tolerance,
+                         found.history)
+
+
 def _interior_point_applies(problem: ContactProblem, options: ContactSolverOptions) -> bool:
     """Whether the problem is the convex QP the interior point solves: no friction, W
     PSD (``options.tresca``: the coupling loop's word for a symmetric PSD W)."""
     return options.tresca and not np.any(problem.mu > 0.0)
+
+
+def _tresca_interior_applies(problem: ContactProblem) -> bool:
+    """Whether the interior point solves the problem's Tresca problems: in 2D, where the
+    friction set is an interval (a box QP; in 3D a disk)."""
+    return problem.dim == 2
 
 
 def _sweeps(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
@@ -518,15 +544,18 @@ def _friction_bound(problem: ContactProblem, P: np.ndarray) -> np.ndarray:
 
 
 def _tresca_fixed_point(problem: ContactProblem, P: np.ndarray,
-                        options: ContactSolverOptions, budget: int) -> ContactResult:
+                        options: ContactSolverOptions, budget: int,
+                        interior: bool = False) -> ContactResult:
     """Coulomb friction as a sequence of Tresca problems: the friction bound s of the
     current impulses held fixed, the problem (then monotone for a symmetric PSD W) solved
     by the semismooth Newton, s updated towards μ P_n(s) by Anderson mixing, until the
     Coulomb residual meets the tolerance (a fixed point s = μ P_n(s) solves the Coulomb
     problem). The plain update s ← μ P_n(s) was seen to cycle between two bounds on dense
     frictional compaction steps (residual 6e-2 ↔ 1e-1 for 40 updates); with the mixing the
-    same problems reach 1e-5 in 12-15 updates. Starts from P; stops after ``budget``
-    Newton iterations; returns its best iterate."""
+    same problems reach 1e-5 in 12-15 updates. With ``interior`` (2D) the interior point
+    solves each Tresca problem (a box QP) from its own start instead of the Newton from
+    the last impulses. Starts from P; stops after ``budget`` Newton (or interior-point)
+    iterations; returns its best iterate."""
     inner = replace(options, tolerance=TRESCA_TOLERANCE_FRACTION * options.tolerance)
     mixing = _AndersonMixing(TRESCA_MIXING_DEPTH)
     bound = None  # the friction bound of the last Tresca problem
@@ -536,6 +565,8 @@ def _tresca_fixed_point(problem: ContactProblem, P: np.ndarray,
         target = _friction_bound(problem, P)
         bound = target if bound is None else np.maximum(
             mixing.next(bound, target - bound), 0.0)
+        if interior:
+            return _interior_point(problem, inner.tolerance, inner.floor, bound)
         return _newton(problem, P, inner, threshold=bound)
 
     best = ContactResult(P, contact_status(problem, P), 0,
