@@ -214,3 +214,19 @@ def test_frictional_redundant_wall_sites_are_solved_by_the_tresca_interior_point
     monkeypatch.setattr(solvers, "_tresca_interior_applies", lambda problem: False)
     stalled = solve(ContactProblem.load(path), start, options)
     assert not stalled.converged and stalled.residual > 10 * options.tolerance
+
+
+def test_problems_above_the_size_limit_keep_the_stages_they_had(monkeypatch):
+    """The interior point factorises the whole problem at each iteration: above
+    solvers.INTERIOR_POINT_CONTACTS it is not tried (the saved frictionless problem, 67
+    contacts, then stalls as before)."""
+    path = BENCHMARK_DATA / "redundant_wall_sites_step.npz"
+    with np.load(path) as data:
+        start = data["warm_start"]
+        options = ContactSolverOptions(tolerance=data["option_tolerance"].item(),
+                                       acceptable=data["option_acceptable"].item(),
+                                       floor=data["option_floor"].item())
+    monkeypatch.setattr(solvers, "INTERIOR_POINT_CONTACTS", 66)
+    assert not solve(ContactProblem.load(path), start, options).converged
+    monkeypatch.setattr(solvers, "INTERIOR_POINT_CONTACTS", 67)
+    assert solve(ContactProblem.load(path), start, options).converged

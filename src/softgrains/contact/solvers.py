@@ -26,11 +26,12 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   updated with Anderson mixing; then the **proximal point** loop (W + εI, well posed where
   redundant sites make W singular), then (2D) the Tresca fixed point again with its
   Tresca problems solved by the **interior point** (interior_point.py: box QPs; session
-  51), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps from the best iterate (on an indefinite W the sweeps come before the proximal point, as
-  they all did before session 26). Without friction on a PSD W the first fallback is the
-  **interior point** (interior_point.py: the convex QP's primal-dual path, whose systems
-  stay definite where redundant sites make W singular and stall the Newton's active
-  sets; session 51), then the sweeps, then the proximal point. Every Newton starts from
+  51), then up to NSGS_FALLBACK_SWEEPS Gauss–Seidel sweeps from the best iterate (on an
+  indefinite W the sweeps come before the proximal point, as they all did before session
+  26). Without friction on a PSD W the first fallback is the **interior point** (the
+  convex QP's primal-dual path, whose systems stay definite where redundant sites make W
+  singular and stall the Newton's active sets), then the sweeps, then the proximal
+  point; the interior point only up to INTERIOR_POINT_CONTACTS. Every Newton starts from
   WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess. The result's
   ``fallback_gain`` says what the fallbacks gained over the stalled Newton.
   Dimension-generic (the 3D cone's projection is exact).
@@ -103,6 +104,12 @@ FALLBACK_NEWTON_BUDGET = 200
 # and the Tresca fixed point 40-100 more; 20 sweeps (~30 ms on 2600 contacts) bring it to
 # ~1e-2, from where the Newton meets the solve's tolerance in 2-15 iterations
 WARMUP_SWEEPS = 20
+# the interior point (a sparse LU of the whole problem each iteration, up to
+# FALLBACK_NEWTON_BUDGET of them a solve) is tried on problems up to this many contacts:
+# 11-14 ms an iteration at 630-660 contacts of the dense frictional example (session 51);
+# the 1000-grain front's 43 000, whose first solves fail every step (docs/dev-notes.md,
+# #14 item 2), were not measured and keep the stages they had
+INTERIOR_POINT_CONTACTS = 5000
 SWEEP_CHUNK = 10  # Gauss–Seidel sweeps between two evaluations of the residual
 # the last fallback's sweeps (with friction) stop early after FALLBACK_PATIENCE evaluations
 # none of which made progress (a residual below FALLBACK_PROGRESS × the last one that did),
@@ -315,14 +322,17 @@ def _interior_point(problem: ContactProblem, tolerance: float, floor: float,
 
 def _interior_point_applies(problem: ContactProblem, options: ContactSolverOptions) -> bool:
     """Whether the problem is the convex QP the interior point solves: no friction, W
-    PSD (``options.tresca``: the coupling loop's word for a symmetric PSD W)."""
-    return options.tresca and not np.any(problem.mu > 0.0)
+    PSD (``options.tresca``: the coupling loop's word for a symmetric PSD W), at most
+    INTERIOR_POINT_CONTACTS contacts."""
+    return (options.tresca and not np.any(problem.mu > 0.0)
+            and problem.n_contacts <= INTERIOR_POINT_CONTACTS)
 
 
 def _tresca_interior_applies(problem: ContactProblem) -> bool:
     """Whether the interior point solves the problem's Tresca problems: in 2D, where the
-    friction set is an interval (a box QP; in 3D a disk)."""
-    return problem.dim == 2
+    friction set is an interval (a box QP; in 3D a disk), with at most
+    INTERIOR_POINT_CONTACTS contacts."""
+    return problem.dim == 2 and problem.n_contacts <= INTERIOR_POINT_CONTACTS
 
 
 def _sweeps(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
