@@ -230,3 +230,20 @@ def test_problems_above_the_size_limit_keep_the_stages_they_had(monkeypatch):
     assert not solve(ContactProblem.load(path), start, options).converged
     monkeypatch.setattr(solvers, "INTERIOR_POINT_CONTACTS", 67)
     assert solve(ContactProblem.load(path), start, options).converged
+
+
+def test_a_closing_contact_no_body_can_move_is_reported_not_hidden():
+    """A contact between two kinematic sides closing at 1 (W_cc = 0: nothing can stop it)
+    beside one on a body: the interior point reports the Coulomb residual every solver
+    reports (problem.residual_norm), not a residual that leaves that contact out."""
+    problem = ContactProblem(
+        normal=np.array([[0.0, 1.0], [0.0, 1.0]]), bias=np.zeros(2), mu=np.zeros(2),
+        a_slot=np.array([0, -1]), a_col=np.array([0, 0]),
+        b_slot=np.array([-1, -1]), b_col=np.array([0, 0]),
+        wall_va=np.array([[0.0, 0.0], [0.0, -1.0]]), wall_vb=np.zeros((2, 2)),
+        k_off=np.zeros(1, np.int64), k_size=np.array([1], np.int64),
+        w_off=np.zeros(1, np.int64), W=np.eye(2).ravel(), V_free=np.array([[0.0, -1.0]]))
+    result = interior_point(problem, 1e-10)
+    assert result.residual == pytest.approx(residual_norm(problem, result.impulse))
+    assert result.residual > 0.1  # the closing contact
+    assert result.impulse[0] == pytest.approx([0.0, 1.0], abs=1e-9)  # the body's is solved

@@ -24,9 +24,11 @@ multipliers z_l, z_u ≥ 0, each iteration solves
 
 k = σ τ e − S z (the corrector also − ΔS_aff Δz_aff), whose matrix is positive definite at
 every interior iterate however singular W is; it needs a number of iterations that hardly
-depends on W's conditioning. Each iterate is measured as its impulses with the normal
-components x_c set to 0 where x_c ≤ ρ_c y_c (what the natural map's local solve would
-keep), on the problem's own natural-map residual (Coulomb with μ = 0, or Tresca's).
+depends on W's conditioning (the frictionless case is the one without upper bounds, the
+multipliers z_l being the velocities y). Each iterate is measured as its impulses with
+the normal components x_c set to 0 where x_c ≤ ρ_c y_c (what the natural map's local
+solve would keep), on the problem's own natural-map residual (Coulomb with μ = 0, as
+problem.residual_norm; or Tresca's, as the semismooth Newton's of that law).
 """
 
 from __future__ import annotations
@@ -43,6 +45,7 @@ from softgrains.contact.problem import (
     impulse_scale,
     normal_masses,
     relative_error,
+    residual_norm,
     to_global,
     to_local,
     velocity_scale,
@@ -52,7 +55,8 @@ ITERATIONS = 60  # each one sparse LU of the matrix W + Z S⁻¹ on the free com
 STAGNATION = 10  # ... it stops after this many iterations without a better residual
 BOUNDARY_FRACTION = 0.99  # the step goes this fraction of the way to a bound
 # a tangential component whose friction bound is below this fraction of the impulse scale
-# is held at 0 (its box would be narrower than the round-off of the impulses)
+# is held at 0 (its box would be narrower than the round-off of the impulses; it leaves a
+# residual up to ~this fraction: tolerances stay above it)
 NARROWEST_BOX = 1e-10
 
 
@@ -81,14 +85,20 @@ class _BoxQP:
     free: np.ndarray
 
 
+def _local_delassus(problem: ContactProblem) -> tuple[sp.csr_matrix, np.ndarray]:
+    """W in the contacts' frames and g = q + b on the normals (flat local components),
+    assembled once per problem (the Tresca fixed point poses many QPs on it)."""
+    frames = problem.frames()
+    g = to_local(frames, problem.free_velocity()).ravel()
+    g[0::problem.dim] += problem.bias
+    return problem.delassus(frames).tocsr(), g
+
+
 def _box_qp(problem: ContactProblem, bound: np.ndarray) -> _BoxQP:
     """The QP of the problem with friction bound ``bound`` per contact (0: frictionless)."""
     d = problem.dim
-    frames = problem.frames()
-    W = problem.delassus(frames).tocsr()
+    W, g = problem._cached("box_qp", lambda: _local_delassus(problem))
     movable = W.diagonal()[0::d] > 0.0  # (W_cc,nn = 0: no body can move there)
-    g = to_local(frames, problem.free_velocity()).ravel()
-    g[0::d] += problem.bias
     keep = np.zeros((problem.n_contacts, d), bool)
     keep[:, 0] = movable
     keep[:, 1:] = (movable & (bound > NARROWEST_BOX * impulse_scale(problem)))[:, None]
@@ -110,7 +120,8 @@ def interior_point(problem: ContactProblem, tolerance: float, floor: float = 0.0
     STAGNATION without a better residual. Returns the best iterate (P = 0 where the
     problem has no scale: nothing approaches)."""
     n, d = problem.n_contacts, problem.dim
-    if bound is None:
+    frictionless = bound is None
+    if frictionless:
         if np.any(problem.mu > 0.0):
             raise ValueError("without a friction bound the interior point solves "
                              "frictionless problems only (μ = 0)")
@@ -134,8 +145,10 @@ def interior_point(problem: ContactProblem, tolerance: float, floor: float = 0.0
         local[pressed, 0] = np.where(r[normal] > rho[pressed] * gap_rate, r[normal], 0.0)
         P = to_global(frames, local)
         w = problem.velocities(P)
+        if frictionless:  # the Coulomb residual every solver reports (also where no body
+            return residual_norm(problem, P, w, floor), P  # can move a closing contact)
         phi = linearise(local, to_local(frames, w), problem.bias, problem.mu, rho, movable,
-                        bound).phi
+                        bound).phi  # (the Tresca residual, as the Newton's of that law)
         return relative_error(problem, phi, P, w, floor), P
 
     residual, P = measure(np.zeros(qp.free.size))
@@ -155,7 +168,10 @@ def interior_point(problem: ContactProblem, tolerance: float, floor: float = 0.0
         best.history.append(residual)
         best.iterations = k
         if residual < best.residual:
-            best.impulse, best.residual, best_at = P, residual, k
+            best_at = k
+        if residual <= best.residual:  # (a tie: the later iterate, nearer the path's end;
+            best.impulse, best.residual = P, residual  # e.g. where a closing contact no
+            # body can move holds the residual)
         if best.residual <= tolerance or k - best_at >= STAGNATION:
             break
     return best

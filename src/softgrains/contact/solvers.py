@@ -104,12 +104,16 @@ FALLBACK_NEWTON_BUDGET = 200
 # and the Tresca fixed point 40-100 more; 20 sweeps (~30 ms on 2600 contacts) bring it to
 # ~1e-2, from where the Newton meets the solve's tolerance in 2-15 iterations
 WARMUP_SWEEPS = 20
-# the interior point (a sparse LU of the whole problem each iteration, up to
-# FALLBACK_NEWTON_BUDGET of them a solve) is tried on problems up to this many contacts:
+# the interior point (a sparse LU of the whole problem each iteration) is tried on
+# problems up to this many contacts:
 # 11-14 ms an iteration at 630-660 contacts of the dense frictional example (session 51);
 # the 1000-grain front's 43 000, whose first solves fail every step (docs/dev-notes.md,
 # #14 item 2), were not measured and keep the stages they had
 INTERIOR_POINT_CONTACTS = 5000
+# the interior-point iterations the Tresca fixed point on it may spend in one solve,
+# beside FALLBACK_NEWTON_BUDGET (checked after each Tresca problem: up to ITERATIONS more);
+# the frictional squeeze's 36 saved failures took 12-51, two 90 and 102 (session 51)
+INTERIOR_POINT_BUDGET = 100
 SWEEP_CHUNK = 10  # Gauss–Seidel sweeps between two evaluations of the residual
 # the last fallback's sweeps (with friction) stop early after FALLBACK_PATIENCE evaluations
 # none of which made progress (a residual below FALLBACK_PROGRESS × the last one that did),
@@ -282,7 +286,11 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
 
     def interior(best: ContactResult) -> ContactResult:
         # (frictionless on a PSD W: an exact method for the convex QP, whose iterations
-        # do not stall on a singular W as the Newton's active sets do; session 51)
+        # do not stall on a singular W as the Newton's active sets do; session 51. Not on
+        # the deformation-scale retry: ρ_c does not enter its systems, its result would be
+        # the first try's)
+        if options.deformation_scale:
+            return best
         return _better(best, _interior_point(problem, options.tolerance, options.floor))
 
     def tresca_interior(best: ContactResult) -> ContactResult:
@@ -292,10 +300,13 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
         # D/h 20 and 0.05 h a step, failed solves 26 -> 1, retried steps 3 -> 0. After the
         # proximal point, not before: on the frictional example the few solves the
         # proximal point finishes it did not, and cost 0.4 s where it ran first)
-        if not _tresca_interior_applies(problem):
+        # Its own budget (the Newton's is spent by then), not on the deformation-scale
+        # retry (ρ_c does not enter its systems). From the fallbacks' start: from the best
+        # iterate so far it was no better (36 saved squeeze problems, session 51)
+        if not _tresca_interior_applies(problem) or options.deformation_scale:
             return best
         return _better(best, _tresca_fixed_point(problem, start, options,
-                                                 FALLBACK_NEWTON_BUDGET, interior=True))
+                                                 INTERIOR_POINT_BUDGET, interior=True))
 
     if frictional:
         stages = (proximal, tresca_interior, sweeps)
