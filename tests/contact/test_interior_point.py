@@ -105,16 +105,17 @@ def test_a_rigid_block_slides_on_redundant_wall_sites_under_a_tresca_bound(veloc
 def test_the_tresca_interior_point_agrees_with_bounded_least_squares(seed):
     """A random 2D problem with W = AᵀA of rank 24 on 20 contacts (40 components), free
     velocities q = Aᵀb and friction bounds s: the Tresca problem is the optimality
-    condition of min ½‖A r + b‖² over r_n ≥ 0, |r_t| ≤ s (local frames = global here),
-    which SciPy's bounded least squares (BVLS, an active-set method) solves exactly. The
-    velocities W r + q are unique: the two must agree."""
+    condition of min ½‖A r + b‖² over r_n ≥ 0, |r_t| ≤ s (in global components, A's
+    columns (n, t) per contact being (y, x): the contacts' tangent is −x, and the box is
+    the same for either sign), which SciPy's bounded least squares (BVLS, an active-set
+    method) solves exactly. The velocities W r + q are unique: the two must agree."""
     rng = np.random.default_rng(seed)
     n, rank = 20, 24
     A = rng.normal(size=(rank, 2 * n))
     b = rng.normal(size=rank)
     bound = rng.uniform(0.0, 0.3, size=n)
     problem = _wall_problem(A.T @ A, (A.T @ b).reshape(n, 2)[:, ::-1].copy())
-    # (the wall's frames have the normal e_y first: swap so that W and q are in them)
+    # (A's (n, t) components per contact are the global (y, x): W and q reordered)
     perm = np.arange(2 * n).reshape(n, 2)[:, ::-1].ravel()
     problem.W = (A.T @ A)[np.ix_(perm, perm)].ravel().copy()
     problem.mu = np.full(n, 0.5)
