@@ -10,11 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear, nnls
+from test_problem_solvers import saved_problem
 
 from softgrains.contact import solvers
 from softgrains.contact.interior_point import interior_point
 from softgrains.contact.problem import ContactProblem, residual_norm
-from softgrains.contact.solvers import ContactSolverOptions, solve
+from softgrains.contact.solvers import solve
 
 BENCHMARK_DATA = Path(__file__).resolve().parents[2] / "benchmarks" / "data"
 DATA = Path(__file__).resolve().parent / "data"
@@ -166,13 +167,7 @@ def test_redundant_wall_sites_that_stall_every_other_stage_are_solved(name, monk
     iterations, measured). The interior point, the first fallback of a stalled
     frictionless Newton since session 51, meets the tolerance in ~20 iterations."""
     path = BENCHMARK_DATA / name
-    with np.load(path) as data:
-        start = data["warm_start"]
-        saved = {f: data[f"option_{f}"].item() for f in
-                 ("tolerance", "max_iterations", "floor", "tresca", "fallbacks", "acceptable",
-                  "warmup")}
-    options = ContactSolverOptions(**saved)
-    problem = ContactProblem.load(path)
+    problem, start, options = saved_problem(path)
     result = solve(problem, start, options)
     assert result.converged
     assert residual_norm(problem, result.impulse, floor=options.floor) <= options.tolerance
@@ -201,13 +196,7 @@ def test_frictional_redundant_wall_sites_are_solved_by_the_tresca_interior_point
     Tresca problems the interior point solves (after the proximal point) meets it:
     3.3e-8 (measured)."""
     path = DATA / "frictional_redundant_wall_sites.npz"
-    with np.load(path) as data:
-        start = data["warm_start"]
-        saved = {f: data[f"option_{f}"].item() for f in
-                 ("tolerance", "max_iterations", "floor", "tresca", "fallbacks", "acceptable",
-                  "warmup")}
-    options = ContactSolverOptions(**saved)
-    problem = ContactProblem.load(path)
+    problem, start, options = saved_problem(path)
     assert problem.mu.min() > 0.0
     result = solve(problem, start, options)
     assert result.converged
@@ -222,11 +211,7 @@ def test_problems_above_the_size_limit_keep_the_stages_they_had(monkeypatch):
     solvers.INTERIOR_POINT_CONTACTS it is not tried (the saved frictionless problem, 67
     contacts, then stalls as before)."""
     path = BENCHMARK_DATA / "redundant_wall_sites_step.npz"
-    with np.load(path) as data:
-        start = data["warm_start"]
-        options = ContactSolverOptions(tolerance=data["option_tolerance"].item(),
-                                       acceptable=data["option_acceptable"].item(),
-                                       floor=data["option_floor"].item())
+    _, start, options = saved_problem(path)
     monkeypatch.setattr(solvers, "INTERIOR_POINT_CONTACTS", 66)
     assert not solve(ContactProblem.load(path), start, options).converged
     monkeypatch.setattr(solvers, "INTERIOR_POINT_CONTACTS", 67)

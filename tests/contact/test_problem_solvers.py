@@ -746,9 +746,10 @@ def test_the_delassus_product_reads_the_rows_of_the_nonzero_impulses(d):
                          np.tile(np.eye(d)[0], (2, 1)))
 
 
-def _saved(name: str) -> tuple[ContactProblem, np.ndarray, ContactSolverOptions]:
-    """A problem saved with its warm start and solver options (contact_problems_from_run)."""
-    path = DATA / name
+def saved_problem(name: str | Path) -> tuple[ContactProblem, np.ndarray, ContactSolverOptions]:
+    """A problem saved with its warm start and solver options (contact_problems_from_run;
+    a file name in tests/contact/data, or a path)."""
+    path = name if isinstance(name, Path) else DATA / name
     with np.load(path) as data:
         start = data["warm_start"]
         saved = {f: data[f"option_{f}"].item() for f in
@@ -772,7 +773,7 @@ def test_a_stalled_solve_is_tried_again_on_the_contacts_deformation_scale(monkey
     from softgrains.contact.problem import deformation_masses, normal_masses
 
     monkeypatch.setattr(solvers, "_tresca_interior_applies", lambda problem: False)
-    problem, start, options = _saved("rigid_dominated_squeeze.npz")
+    problem, start, options = saved_problem("rigid_dominated_squeeze.npz")
     ratio = deformation_masses(problem) / normal_masses(problem)
     assert ratio.min() > 1e3  # the rigid modes carry all but < 1e-3 of every W_cc
     result = solve(problem, start, options)
