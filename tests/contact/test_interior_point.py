@@ -208,13 +208,17 @@ def test_frictional_redundant_wall_sites_are_solved_by_the_tresca_interior_point
 
 def test_problems_above_the_size_limit_keep_the_stages_they_had(monkeypatch):
     """The interior point factorises the whole problem at each iteration: above
-    solvers.INTERIOR_POINT_CONTACTS it is not tried (the saved frictionless problem, 67
-    contacts, then stalls as before)."""
+    solvers.INTERIOR_POINT_NONZEROS nonzeros in W it is not tried (the saved frictionless
+    problem, one body, 67 contacts: 4 × 67² = 17 956, W's nonzeros exactly; then it
+    stalls as before)."""
+    from softgrains.contact.interior_point import delassus_nonzeros
+
     path = BENCHMARK_DATA / "redundant_wall_sites_step.npz"
-    _, start, options = saved_problem(path)
-    monkeypatch.setattr(solvers, "INTERIOR_POINT_CONTACTS", 66)
+    problem, start, options = saved_problem(path)
+    assert delassus_nonzeros(problem) == problem.delassus().nnz == 17956
+    monkeypatch.setattr(solvers, "INTERIOR_POINT_NONZEROS", 17955)
     assert not solve(ContactProblem.load(path), start, options).converged
-    monkeypatch.setattr(solvers, "INTERIOR_POINT_CONTACTS", 67)
+    monkeypatch.setattr(solvers, "INTERIOR_POINT_NONZEROS", 17956)
     assert solve(ContactProblem.load(path), start, options).converged
 
 

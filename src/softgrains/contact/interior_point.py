@@ -85,6 +85,15 @@ class _BoxQP:
     free: np.ndarray
 
 
+def delassus_nonzeros(problem: ContactProblem) -> int:
+    """d² Σ_s m_s² over the bodies s (m_s: the contacts touching s): W's nonzeros, a pair
+    of contacts sharing both their bodies counted twice (within 10% on the dense
+    compaction's problems). An iteration's LU grows with it, without assembling W."""
+    _, slot, _, _ = problem.touches()
+    per_body = np.bincount(slot).astype(np.int64)
+    return problem.dim ** 2 * int(np.sum(per_body ** 2))
+
+
 def _local_delassus(problem: ContactProblem) -> tuple[sp.csr_matrix, np.ndarray]:
     """W in the contacts' frames and g = q + b on the normals (flat local components),
     assembled once per problem (the Tresca fixed point poses many QPs on it)."""

@@ -31,7 +31,7 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   26). Without friction on a PSD W the first fallback is the **interior point** (the
   convex QP's primal-dual path, whose systems stay definite where redundant sites make W
   singular and stall the Newton's active sets), then the sweeps, then the proximal
-  point; the interior point only up to INTERIOR_POINT_CONTACTS. Every Newton starts from
+  point; the interior point only up to INTERIOR_POINT_NONZEROS. Every Newton starts from
   WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess. The result's
   ``fallback_gain`` says what the fallbacks gained over the stalled Newton.
   Dimension-generic (the 3D cone's projection is exact).
@@ -48,7 +48,7 @@ import numpy as np
 from softgrains.contact.alart_curnier import linearise
 from softgrains.contact.delassus import BlockRows, product
 from softgrains.contact.gauss_seidel import gauss_seidel
-from softgrains.contact.interior_point import interior_point
+from softgrains.contact.interior_point import delassus_nonzeros, interior_point
 from softgrains.contact.local_law import OPEN, SLIP, STICK
 from softgrains.contact.newton_matrix import NewtonMatrix
 from softgrains.contact.problem import (
@@ -105,11 +105,12 @@ FALLBACK_NEWTON_BUDGET = 200
 # ~1e-2, from where the Newton meets the solve's tolerance in 2-15 iterations
 WARMUP_SWEEPS = 20
 # the interior point (a sparse LU of the whole problem each iteration) is tried on
-# problems up to this many contacts:
-# 11-14 ms an iteration at 630-660 contacts of the dense frictional example (session 51);
-# the 1000-grain front's 43 000, whose first solves fail every step (docs/dev-notes.md,
-# #14 item 2), were not measured and keep the stages they had
-INTERIOR_POINT_CONTACTS = 5000
+# problems with up to this many nonzeros in W (interior_point.delassus_nonzeros): an
+# iteration grew with them, 19 / 75 ms at 0.15 / 0.59 M (the dense frictional example's
+# 632 contacts at D/h 10, 1264 at D/h 20; session 51, beside two runs): ~0.25 s here, at
+# most INTERIOR_POINT_BUDGET of them a solve. The 1000-grain front (43 000 contacts, ~10 M;
+# its first solves fail every step, docs/dev-notes.md #14 item 2) keeps the stages it had
+INTERIOR_POINT_NONZEROS = 2_000_000
 # the interior-point iterations the Tresca fixed point on it may spend in one solve,
 # beside FALLBACK_NEWTON_BUDGET (checked after each Tresca problem: up to ITERATIONS more);
 # the frictional squeeze's 36 saved failures took 12-51, two 90 and 102 (session 51)
@@ -335,17 +336,17 @@ def _interior_point(problem: ContactProblem, tolerance: float, floor: float,
 
 def _interior_point_applies(problem: ContactProblem, options: ContactSolverOptions) -> bool:
     """Whether the problem is the convex QP the interior point solves: no friction, W
-    PSD (``options.tresca``: the coupling loop's word for a symmetric PSD W), at most
-    INTERIOR_POINT_CONTACTS contacts."""
+    PSD (``options.tresca``: the coupling loop's word for a symmetric PSD W), small
+    enough (INTERIOR_POINT_NONZEROS)."""
     return (options.tresca and not np.any(problem.mu > 0.0)
-            and problem.n_contacts <= INTERIOR_POINT_CONTACTS)
+            and delassus_nonzeros(problem) <= INTERIOR_POINT_NONZEROS)
 
 
 def _tresca_interior_applies(problem: ContactProblem) -> bool:
     """Whether the interior point solves the problem's Tresca problems: in 2D, where the
-    friction set is an interval (a box QP; in 3D a disk), with at most
-    INTERIOR_POINT_CONTACTS contacts."""
-    return problem.dim == 2 and problem.n_contacts <= INTERIOR_POINT_CONTACTS
+    friction set is an interval (a box QP; in 3D a disk), small enough
+    (INTERIOR_POINT_NONZEROS)."""
+    return problem.dim == 2 and delassus_nonzeros(problem) <= INTERIOR_POINT_NONZEROS
 
 
 def _sweeps(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
