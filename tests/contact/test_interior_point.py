@@ -237,3 +237,4 @@ def test_a_closing_contact_no_body_can_move_is_reported_not_hidden():
     assert result.residual == pytest.approx(residual_norm(problem, result.impulse))
     assert result.residual > 0.1  # the closing contact
     assert result.impulse[0] == pytest.approx([0.0, 1.0], abs=1e-9)  # the body's is solved
+    assert result.iterations < 10  # (stopped there, not after STAGNATION iterations)

@@ -748,7 +748,7 @@ def test_the_delassus_product_reads_the_rows_of_the_nonzero_impulses(d):
 
 def saved_problem(name: str | Path) -> tuple[ContactProblem, np.ndarray, ContactSolverOptions]:
     """A problem saved with its warm start and solver options (contact_problems_from_run;
-    a file name in tests/contact/data, or a path)."""
+    a file name (str) in tests/contact/data, or a Path)."""
     path = name if isinstance(name, Path) else DATA / name
     with np.load(path) as data:
         start = data["warm_start"]

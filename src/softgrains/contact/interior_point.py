@@ -43,9 +43,9 @@ from softgrains.contact.alart_curnier import linearise
 from softgrains.contact.problem import (
     ContactProblem,
     impulse_scale,
+    natural_map_residual,
     normal_masses,
     relative_error,
-    residual_norm,
     to_global,
     to_local,
     velocity_scale,
@@ -145,8 +145,10 @@ def interior_point(problem: ContactProblem, tolerance: float, floor: float = 0.0
     movable = np.zeros(n, bool)
     movable[pressed] = True
 
-    def measure(r: np.ndarray) -> tuple[float, np.ndarray]:
-        """The residual of r with its normals snapped (w̃_n = (W r + g)_n), and its P."""
+    def measure(r: np.ndarray) -> tuple[float, float, np.ndarray]:
+        """The residual of r with its normals snapped (w̃_n = (W r + g)_n), the same over
+        the contacts some body can move (what the iterations can change: their progress),
+        and its P."""
         gap_rate = (qp.W @ r + qp.g)[normal]
         local = np.zeros(n * d)
         local[qp.free] = r
@@ -155,15 +157,19 @@ def interior_point(problem: ContactProblem, tolerance: float, floor: float = 0.0
         P = to_global(frames, local)
         w = problem.velocities(P)
         if frictionless:  # the Coulomb residual every solver reports (also where no body
-            return residual_norm(problem, P, w, floor), P  # can move a closing contact)
+            phi = natural_map_residual(problem, P, w)  # can move a closing contact)
+            reported = relative_error(problem, phi, P, w, floor)
+            phi[~movable] = 0.0
+            return reported, relative_error(problem, phi, P, w, floor), P
         phi = linearise(local, to_local(frames, w), problem.bias, problem.mu, rho, movable,
-                        bound).phi  # (the Tresca residual, as the Newton's of that law)
-        return relative_error(problem, phi, P, w, floor), P
+                        bound).phi  # (the Tresca residual, as the Newton's of that law,
+        residual = relative_error(problem, phi, P, w, floor)  # zero where nothing moves)
+        return residual, residual, P
 
-    residual, P = measure(np.zeros(qp.free.size))
-    best = InteriorPointResult(P, residual, 0)
+    residual, progress, P = measure(np.zeros(qp.free.size))
+    best, best_progress = InteriorPointResult(P, residual, 0), progress
     x0, y0 = impulse_scale(problem), velocity_scale(problem)
-    if not (x0 > 0.0 and y0 > 0.0) or qp.free.size == 0 or best.residual <= tolerance:
+    if not (x0 > 0.0 and y0 > 0.0) or qp.free.size == 0 or progress <= tolerance:
         return best
     r = np.where(qp.boxed, 0.0, x0)  # (a box's middle)
     z_l, z_u = np.full(r.size, y0), np.where(qp.boxed, y0, 0.0)
@@ -173,15 +179,13 @@ def interior_point(problem: ContactProblem, tolerance: float, floor: float = 0.0
         if step is None:
             break
         r, z_l, z_u = step
-        residual, P = measure(r)
+        residual, progress, P = measure(r)
         best.history.append(residual)
         best.iterations = k
-        if residual < best.residual:
-            best_at = k
-        if residual <= best.residual:  # (a tie: the later iterate, nearer the path's end;
-            best.impulse, best.residual = P, residual  # e.g. where a closing contact no
-            # body can move holds the residual)
-        if best.residual <= tolerance or k - best_at >= STAGNATION:
+        if progress < best_progress:  # (judged where the iterations act: a closing
+            best.impulse, best.residual = P, residual  # contact no body can move holds
+            best_progress, best_at = progress, k  # the reported residual)
+        if best_progress <= tolerance or k - best_at >= STAGNATION:
             break
     return best
 

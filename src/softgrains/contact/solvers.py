@@ -105,10 +105,11 @@ FALLBACK_NEWTON_BUDGET = 200
 # ~1e-2, from where the Newton meets the solve's tolerance in 2-15 iterations
 WARMUP_SWEEPS = 20
 # the interior point (a sparse LU of the whole problem each iteration) is tried on
-# problems with up to this many nonzeros in W (interior_point.delassus_nonzeros): an
-# iteration grew with them, 19 / 75 ms at 0.15 / 0.59 M (the dense frictional example's
-# 632 contacts at D/h 10, 1264 at D/h 20; session 51, beside two runs): ~0.25 s here, at
-# most INTERIOR_POINT_BUDGET of them a solve. The 1000-grain front (43 000 contacts, ~10 M;
+# problems with up to this many nonzeros in W (interior_point.delassus_nonzeros, an
+# estimate within 10% above the count): an iteration grew with them, 12–19 / 46–75 ms at
+# 0.16 / 0.65 M estimated (the dense frictional example's 632 contacts at D/h 10, 1264 at
+# D/h 20; session 51, beside one or two runs): ~0.25 s here, at most
+# INTERIOR_POINT_BUDGET of them a solve. The 1000-grain front (43 000 contacts, ~10 M;
 # its first solves fail every step, docs/dev-notes.md #14 item 2) keeps the stages it had
 INTERIOR_POINT_NONZEROS = 2_000_000
 # the interior-point iterations the Tresca fixed point on it may spend in one solve,
@@ -304,8 +305,9 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
         # solves the proximal point finished, and the fallbacks took 3.0 s of a 60-s run
         # where it ran first, 1.1 s after, 0.55 s without it. Its own budget (the
         # Newton's is spent by then); not on the deformation-scale retry (ρ_c does not
-        # enter its systems); from the fallbacks' start: from the best iterate so far it
-        # was no better on 36 saved squeeze problems)
+        # enter its systems; only the retry's own start would differ: a cost choice);
+        # from the fallbacks' start: from the best iterate so far it was no better on 36
+        # saved squeeze problems)
         if not _tresca_interior_applies(problem) or options.deformation_scale:
             return best
         return _better(best, _tresca_fixed_point(problem, start, options,
