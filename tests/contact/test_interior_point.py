@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from scipy.optimize import lsq_linear, nnls
-from test_problem_solvers import saved_problem
+from test_problem_solvers import one_body_problem, saved_problem
 
 from softgrains.contact import solvers
 from softgrains.contact.interior_point import interior_point
@@ -24,14 +24,7 @@ DATA = Path(__file__).resolve().parent / "data"
 def _wall_problem(W: np.ndarray, V_free: np.ndarray) -> ContactProblem:
     """n contacts of one body (rows 0..n−1, compliance W (2n × 2n)) on a fixed wall below
     it (normals e_y), without friction."""
-    n = V_free.shape[0]
-    return ContactProblem(
-        normal=np.tile([0.0, 1.0], (n, 1)), bias=np.zeros(n), mu=np.zeros(n),
-        a_slot=np.zeros(n, np.int64), a_col=np.arange(n, dtype=np.int64),
-        b_slot=-np.ones(n, np.int64), b_col=np.zeros(n, np.int64),
-        wall_va=np.zeros((n, 2)), wall_vb=np.zeros((n, 2)),
-        k_off=np.zeros(1, np.int64), k_size=np.array([n], np.int64),
-        w_off=np.zeros(1, np.int64), W=W.ravel().copy(), V_free=V_free.copy())
+    return one_body_problem(W, V_free, np.tile([0.0, 1.0], (V_free.shape[0], 1)))
 
 
 def _rigid_block(mass, inertia, sites, velocity, spin):
@@ -201,7 +194,8 @@ def test_frictional_redundant_wall_sites_are_solved_by_the_tresca_interior_point
     result = solve(problem, start, options)
     assert result.converged
     assert residual_norm(problem, result.impulse, floor=options.floor) <= options.tolerance
-    monkeypatch.setattr(solvers, "_tresca_interior_applies", lambda problem: False)
+    monkeypatch.setattr(solvers, "_tresca_interior_applies",
+                        lambda problem, options: False)
     stalled = solve(ContactProblem.load(path), start, options)
     assert not stalled.converged and stalled.residual > 10 * options.tolerance
 

@@ -772,7 +772,8 @@ def test_a_stalled_solve_is_tried_again_on_the_contacts_deformation_scale(monkey
     off here to test the retry, which is what a 3D problem has."""
     from softgrains.contact.problem import deformation_masses, normal_masses
 
-    monkeypatch.setattr(solvers, "_tresca_interior_applies", lambda problem: False)
+    monkeypatch.setattr(solvers, "_tresca_interior_applies",
+                        lambda problem, options: False)
     problem, start, options = saved_problem("rigid_dominated_squeeze.npz")
     ratio = deformation_masses(problem) / normal_masses(problem)
     assert ratio.min() > 1e3  # the rigid modes carry all but < 1e-3 of every W_cc

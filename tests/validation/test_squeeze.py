@@ -297,7 +297,8 @@ def test_the_frictional_quasi_static_squeeze_in_half_steps_has_no_failed_solve(m
         return sim.retried_steps, sum(failed)
 
     assert run() == (0, 0)
-    monkeypatch.setattr(solvers, "_tresca_interior_applies", lambda problem: False)
+    monkeypatch.setattr(solvers, "_tresca_interior_applies",
+                        lambda problem, options: False)
     assert run()[1] > 0  # what the interior point changes
 
 
@@ -332,7 +333,8 @@ def test_the_momentum_form_squeezes_between_frictional_plates_without_a_retried_
 
     retried, mean, most, failed = run()
     assert retried == 0 and failed == 0 and mean <= 4.0 and most <= 8
-    monkeypatch.setattr(solvers, "_tresca_interior_applies", lambda problem: False)
+    monkeypatch.setattr(solvers, "_tresca_interior_applies",
+                        lambda problem, options: False)
     assert run()[0::3] == (0, 0)  # the retry alone
     monkeypatch.setattr(solvers, "_rigid_dominated", lambda problem: False)
     retried, _, _, failed = run()

@@ -106,7 +106,7 @@ def _local_delassus(problem: ContactProblem) -> tuple[sp.csr_matrix, np.ndarray]
 def _box_qp(problem: ContactProblem, bound: np.ndarray) -> _BoxQP:
     """The QP of the problem with friction bound ``bound`` per contact (0: frictionless)."""
     d = problem.dim
-    W, g = problem._cached("box_qp", lambda: _local_delassus(problem))
+    W, g = problem._cached("local_delassus", lambda: _local_delassus(problem))
     movable = W.diagonal()[0::d] > 0.0  # (W_cc,nn = 0: no body can move there)
     keep = np.zeros((problem.n_contacts, d), bool)
     keep[:, 0] = movable

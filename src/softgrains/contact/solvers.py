@@ -289,11 +289,7 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
 
     def interior(best: ContactResult) -> ContactResult:
         # (frictionless on a PSD W: an exact method for the convex QP, whose iterations
-        # do not stall on a singular W as the Newton's active sets do; session 51. Not on
-        # the deformation-scale retry: ρ_c does not enter its systems, its result would be
-        # the first try's)
-        if options.deformation_scale:
-            return best
+        # do not stall on a singular W as the Newton's active sets do; session 51)
         return _better(best, _interior_point(problem, options.tolerance, options.floor))
 
     def tresca_interior(best: ContactResult) -> ContactResult:
@@ -304,17 +300,14 @@ def _fallbacks(problem: ContactProblem, P: np.ndarray, result: ContactResult,
         # proximal point, not before: on the frictional example it finished none of the
         # solves the proximal point finished, and the fallbacks took 3.0 s of a 60-s run
         # where it ran first, 1.1 s after, 0.55 s without it. Its own budget (the
-        # Newton's is spent by then); not on the deformation-scale retry (ρ_c does not
-        # enter its systems; only the retry's own start would differ: a cost choice);
-        # from the fallbacks' start: from the best iterate so far it was no better on 36
-        # saved squeeze problems)
-        if not _tresca_interior_applies(problem) or options.deformation_scale:
-            return best
+        # Newton's is spent by then); from the fallbacks' start: from the best iterate so
+        # far it was no better on 36 saved squeeze problems)
         return _better(best, _tresca_fixed_point(problem, start, options,
                                                  INTERIOR_POINT_BUDGET, interior=True))
 
     if frictional:
-        stages = (proximal, tresca_interior, sweeps)
+        stages = ((proximal, tresca_interior, sweeps)
+                  if _tresca_interior_applies(problem, options) else (proximal, sweeps))
     elif _interior_point_applies(problem, options):
         stages = (interior, sweeps, proximal)
     else:
@@ -338,17 +331,26 @@ def _interior_point(problem: ContactProblem, tolerance: float, floor: float,
 
 def _interior_point_applies(problem: ContactProblem, options: ContactSolverOptions) -> bool:
     """Whether the problem is the convex QP the interior point solves: no friction, W
-    PSD (``options.tresca``: the coupling loop's word for a symmetric PSD W), small
-    enough (INTERIOR_POINT_NONZEROS)."""
+    PSD (``options.tresca``: the coupling loop's word for a symmetric PSD W); and
+    :func:`_interior_point_worth_it`."""
     return (options.tresca and not np.any(problem.mu > 0.0)
-            and delassus_nonzeros(problem) <= INTERIOR_POINT_NONZEROS)
+            and _interior_point_worth_it(problem, options))
 
 
-def _tresca_interior_applies(problem: ContactProblem) -> bool:
+def _tresca_interior_applies(problem: ContactProblem, options: ContactSolverOptions) -> bool:
     """Whether the interior point solves the problem's Tresca problems: in 2D, where the
-    friction set is an interval (a box QP; in 3D a disk), small enough
-    (INTERIOR_POINT_NONZEROS)."""
-    return problem.dim == 2 and delassus_nonzeros(problem) <= INTERIOR_POINT_NONZEROS
+    friction set is an interval (a box QP; in 3D a disk); and
+    :func:`_interior_point_worth_it`."""
+    return problem.dim == 2 and _interior_point_worth_it(problem, options)
+
+
+def _interior_point_worth_it(problem: ContactProblem, options: ContactSolverOptions) -> bool:
+    """Small enough (INTERIOR_POINT_NONZEROS), and not the deformation-scale retry: ρ_c
+    does not enter the interior point's systems (frictionless, the retry would get the
+    first try's result again; with friction only its start would differ: a cost
+    choice)."""
+    return (not options.deformation_scale
+            and delassus_nonzeros(problem) <= INTERIOR_POINT_NONZEROS)
 
 
 def _sweeps(problem: ContactProblem, P: np.ndarray, options: ContactSolverOptions,
