@@ -24,7 +24,7 @@ def total_energy(sim) -> float:
     return sim.series_row()["total_energy"]
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def run_example():
     return simulate
 

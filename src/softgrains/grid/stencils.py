@@ -8,6 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from softgrains.errors import SimulationError
+from softgrains.grid.clamps import reflect_ghost_nodes
 from softgrains.grid.lattice import Lattice, NodeBox
 from softgrains.grid.shape_functions import compute_stencils, stencil_width
 from softgrains.grid.transfers import local_node_indices
@@ -23,8 +24,10 @@ class BodyStencils:
 
 
 def body_stencils(lattice: Lattice, shape_kind: int, x: np.ndarray, body: str = "",
-                  step: int = 0) -> BodyStencils:
-    """Stencils of points x; a point whose stencil leaves the lattice is a SimulationError."""
+                  step: int = 0, clamps: np.ndarray | None = None) -> BodyStencils:
+    """Stencils of points x; a point whose stencil leaves the lattice is a SimulationError.
+    ``clamps``: the body's clamped faces (clamps.clamp_faces), whose ghost nodes the
+    points' shape functions reflect (clamps.reflect_ghost_nodes)."""
     n, d = x.shape
     s = stencil_width(shape_kind)
     base = np.empty((n, d), dtype=np.int64)
@@ -40,6 +43,9 @@ def body_stencils(lattice: Lattice, shape_kind: int, x: np.ndarray, body: str = 
             f"[{lattice.domain_lower.tolist()}, {lattice.domain_upper.tolist()}]; enlarge "
             "[grid] size/origin or check the loading.", kind="grid", step=step, body=body,
             point=p)
+    if clamps is not None and clamps.size:
+        if reflect_ghost_nodes(x, lattice.node_origin, lattice.h, base, s, clamps, N, dN) < 0:
+            raise AssertionError("a clamped face's ghost node has its mirror outside a stencil")
     box = NodeBox.of_stencils(base, s)
     nodes = np.empty((n, s**d), dtype=np.int64)
     with threads_for(n):

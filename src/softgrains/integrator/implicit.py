@@ -27,6 +27,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from softgrains.errors import SimulationError
+from softgrains.grid.clamps import clamp_faces
 from softgrains.grid.lattice import Lattice, NodeBox
 from softgrains.grid.shape_functions import stencil_width
 from softgrains.grid.stencils import body_stencils
@@ -232,6 +233,7 @@ class BodyStepper:
         self.s = stencil_width(shape_kind)
         self.settings = settings
         self.constraints = constraints
+        self.clamps = clamp_faces(lattice, constraints)  # faces whose ghost nodes reflect
         self.solver = LinearSolver(settings.linear_solver)
         self.codes = pair_codes(self.s, lattice.dim)
 
@@ -280,7 +282,8 @@ class BodyStep:
         d = self.d = stepper.lattice.dim
         self.newmark = st.kind == "newmark"
         self.consistent = st.mass_matrix == "consistent"
-        stencils = body_stencils(stepper.lattice, stepper.shape_kind, pts.x, stepper.name, step)
+        stencils = body_stencils(stepper.lattice, stepper.shape_kind, pts.x, stepper.name, step,
+                                 stepper.clamps)
         self.box, self.nodes, self.N, self.dN = (stencils.box, stencils.nodes, stencils.N,
                                                  stencils.dN)
         nodes, N, dN = self.nodes, self.N, self.dN
