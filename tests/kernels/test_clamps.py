@@ -15,9 +15,9 @@ LATTICE = Lattice.covering([-1.0, -1.0], [4.0, 4.0], H)  # x = 0 and y = 1 are n
 BSPLINE = SHAPE_FUNCTIONS["bspline2"]
 
 
-def _box(lower, upper, components=(True, True)):
+def _box(lower, upper, components=(True, True), velocity=(0.0, 0.0)):
     return DirichletBox(np.array(lower, float), np.array(upper, float),
-                        np.array(components), np.zeros(2))
+                        np.array(components), np.array(velocity, float))
 
 
 # (box, axis, face coordinate, direction from the face into the body)
@@ -32,7 +32,7 @@ def _points(axis, face, direction, n=400, seed=2):
     rng = np.random.default_rng(seed)
     x = 0.5 + 1.5 * rng.random((n, 2))
     x[:, axis] = face + direction * H * np.where(np.arange(n) % 2, 0.5, 3.0) * rng.random(n)
-    x[0, axis] = face + direction * 1e-12 * H  # on the face
+    x[0, axis] = face  # on the face
     return x
 
 
@@ -49,6 +49,8 @@ def test_clamp_faces_are_the_node_plane_faces_of_full_boxes():
     off_plane = clamp_faces(LATTICE, [_box([-1.0, -1.0], [0.1, 3.0])])
     assert 6 not in off_plane[off_plane[:, 0] == 0, 1]
     assert clamp_faces(LATTICE, [_box([0.0, -1.0], [0.0, 3.0])])[:, 0].tolist() == [1, 1]
+    far = clamp_faces(LATTICE, [_box([-1.0, -1e20], [0.0, 1e20])])  # beyond the lattice
+    assert far[:, :3].tolist() == [[0, 6, 1], [0, 2, -1]]
 
 
 @pytest.mark.parametrize("face", FACES.values(), ids=FACES.keys())
@@ -70,17 +72,42 @@ def test_reflected_functions_keep_unity_and_linear_fields(face):
 
 
 @pytest.mark.parametrize("face", FACES.values(), ids=FACES.keys())
-def test_the_field_at_the_face_is_the_prescribed_value(face):
-    """Nodes in the box at v̄ = 0, the others arbitrary: v(x_f) = 0, where fixing the ghosts
-    alone leaves v(x_f) = v_{f+1}/8 along the face's normal."""
+@pytest.mark.parametrize("prescribed", [0.0, -0.7])
+def test_the_field_at_the_face_is_the_prescribed_value(face, prescribed):
+    """Nodes in the box at v̄, the others arbitrary: v(x_f) = v̄, where fixing the ghosts
+    alone leaves v(x_f) = v̄ + (v_{f+1} − v̄)/8 along the face's normal."""
     box, axis, coordinate, direction = face
-    x = _points(axis, coordinate, direction)[:1]
+    x = _points(axis, coordinate, direction)[:1]  # on the face
     values = {}
     for clamps in (clamp_faces(LATTICE, [box]), None):
         stencils, pos = _stencils(x, clamps)
         inside = np.all((pos >= box.lower - 1e-9) & (pos <= box.upper + 1e-9), axis=-1)
-        v = np.where(inside, 0.0, 1.0 + pos[..., 1 - axis])  # free nodes: 1 + tangential
+        v = np.where(inside, prescribed, 1.0 + pos[..., 1 - axis])  # free: 1 + tangential
         values[clamps is None] = float(np.sum(stencils.N * v))
-    assert abs(values[False]) < 1e-10
-    tangential = x[0, 1 - axis]
-    assert values[True] == pytest.approx((1.0 + tangential) / 8.0, rel=0.05)
+    assert values[False] == pytest.approx(prescribed, abs=1e-12)
+    free = 1.0 + x[0, 1 - axis]  # the free nodes' field, linear along the face
+    assert values[True] == pytest.approx(prescribed + (free - prescribed) / 8.0, rel=1e-9)
+
+
+def test_a_corner_the_body_wraps_round_keeps_positive_weights():
+    """A body round a box's corner: each point reflects across the face in front of it
+    only, so the weights stay ≥ 0 and do not depend on the order of the faces."""
+    box = _box([-1.0, -1.0], [0.0, 1.0])
+    rng = np.random.default_rng(3)
+    x = np.column_stack((0.6 * H * rng.random(300), 1.0 + 0.6 * H * rng.random(300)))
+    x = np.vstack((x, [[0.0025, 1.0025], [0.0, 1.0]]))
+    faces = clamp_faces(LATTICE, [box])
+    stencils, pos = _stencils(x, faces)
+    reversed_order, _ = _stencils(x, faces[::-1].copy())
+    assert np.all(stencils.N >= 0.0)
+    assert np.allclose(stencils.N.sum(axis=1), 1.0, atol=1e-14)
+    assert np.allclose(np.einsum("pk,pkj->pj", stencils.N, pos), x, atol=1e-12)
+    assert np.array_equal(stencils.N, reversed_order.N)
+
+
+def test_linear_hats_have_no_ghost_nodes():
+    x = _points(0, 0.0, 1.0)
+    faces = clamp_faces(LATTICE, [FACES["upper x face"][0]])
+    plain = body_stencils(LATTICE, SHAPE_FUNCTIONS["linear"], x)
+    clamped = body_stencils(LATTICE, SHAPE_FUNCTIONS["linear"], x, clamps=faces)
+    assert np.array_equal(plain.N, clamped.N) and np.array_equal(plain.dN, clamped.dN)

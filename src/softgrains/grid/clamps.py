@@ -18,6 +18,12 @@ nodes carry no mass and leave the active set. Next to the face the first free no
 weight becomes N_{f+1} − N_{f−1} = (x − x_f)/h: linear, as a finite element's. Only boxes
 that prescribe every component and whose face lies on a node plane take it (a roller,
 prescribing some components, keeps its nodes fixed; so does a face between node planes).
+The kernel surfaces' velocity stencils (contact/surfaces.velocity_stencil) renormalise the
+plain functions over the active nodes with a first-moment correction; in front of one face,
+whose ghost nodes are inactive, that gives the reflected functions again. Points inside a
+box keep their functions: a body reaching into the box has its
+functions change across the face (weights jump by up to 1/8 there), which a clamp whose
+material ends at the face never sees.
 """
 
 from __future__ import annotations
@@ -32,16 +38,19 @@ NODE_PLANE_TOLERANCE = 1e-9  # of h: a box face this close to a node plane lies 
 
 def clamp_faces(lattice: Lattice, constraints) -> np.ndarray:
     """The faces of the boxes (``DirichletBox``) that prescribe every velocity component and
-    lie on node planes: rows (axis, face node, direction, box's first nodes (d), box's last
-    nodes (d)); direction +1 for the box's upper face (the body beyond it at higher
-    coordinates), −1 for its lower face. A box one node thick has no ghost nodes."""
+    lie on node planes inside the lattice: rows (axis, face node, direction, box's first
+    nodes (d), box's last nodes (d)); direction +1 for the box's upper face (the body
+    beyond it at higher coordinates), −1 for its lower face. A box one node thick has no
+    ghost nodes."""
     d, h, origin = lattice.dim, lattice.h, lattice.node_origin
     rows = []
     for box in constraints:
         if not np.all(box.components):
             continue
-        lower = (np.asarray(box.lower) - origin) / h
-        upper = (np.asarray(box.upper) - origin) / h
+        # in node units, clipped to just beyond the lattice (a box may reach far past it)
+        beyond = np.asarray(lattice.n_nodes, dtype=float)
+        lower = np.clip((np.asarray(box.lower) - origin) / h, -1.0, beyond)
+        upper = np.clip((np.asarray(box.upper) - origin) / h, -1.0, beyond)
         first = np.ceil(lower - NODE_PLANE_TOLERANCE).astype(np.int64)
         last = np.floor(upper + NODE_PLANE_TOLERANCE).astype(np.int64)
         for axis in range(d):
@@ -49,7 +58,8 @@ def clamp_faces(lattice: Lattice, constraints) -> np.ndarray:
                 continue
             for direction, plane in ((1, upper[axis]), (-1, lower[axis])):
                 node = round(plane)
-                if abs(plane - node) <= NODE_PLANE_TOLERANCE:
+                inside = 0 <= node < lattice.n_nodes[axis]
+                if inside and abs(plane - node) <= NODE_PLANE_TOLERANCE:
                     rows.append([axis, node, direction, *first, *last])
     return np.array(rows, dtype=np.int64).reshape(-1, 3 + 2 * d)
 
@@ -57,17 +67,27 @@ def clamp_faces(lattice: Lattice, constraints) -> np.ndarray:
 @njit(cache=True)
 def reflect_ghost_nodes(x, node_origin, h, base, s, faces, N, dN):
     """Apply the odd reflection of the module docstring to the stencils (N, ∇N) of the
-    points x (base: each stencil's first lattice node per axis, width s) for every face.
-    Returns the number of stencil entries moved, or −1 if a ghost's mirror lies outside a
-    point's stencil (a stencil too narrow for the reflection: a defect, not an input)."""
+    points x (base: each stencil's first lattice node per axis, width s) for every face,
+    for the points on the face or beyond it and, along the other axes, strictly within the
+    box's extent (the face's own reach: near a corner the body wraps round, reflecting
+    across both faces would give negative weights and depend on their order). Returns the number
+    of stencil entries moved, or −1 if a ghost's mirror lies outside a point's stencil (a
+    stencil too narrow for the reflection: a defect, not an input)."""
     n, ns = N.shape
     d = base.shape[1]
     moved = 0
     for p in range(n):
         for f in range(faces.shape[0]):
             axis, face, direction = faces[f, 0], faces[f, 1], faces[f, 2]
-            if direction * ((x[p, axis] - node_origin[axis]) / h - face) <= 0.0:
-                continue  # the point is not on the body's side of this face
+            if direction * ((x[p, axis] - node_origin[axis]) / h - face) < 0.0:
+                continue  # the point is inside the box, behind this face
+            beside = False
+            for j in range(d):
+                xi = (x[p, j] - node_origin[j]) / h
+                if j != axis and (xi <= faces[f, 3 + j] or xi >= faces[f, 3 + d + j]):
+                    beside = True
+            if beside:
+                continue  # beyond the face's plane but not in front of the face
             stride = s**axis
             for k in range(ns):
                 inside = True
