@@ -187,14 +187,18 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
         return ContactResult(P, np.zeros(0, np.int64), 0, 0.0, True)
     if options.method == "nsgs":
         return _nsgs(problem, P, options)
-    # (a warm-up that meets the tolerance still goes on to the Newton: its active set makes
-    # the solution exact, where the sweeps leave a complementarity error of the tolerance's
-    # size, e.g. an energy gain of 1e-8 of a colliding disk's kinetic energy)
+    # The Newton takes at least one iteration (polish), even from a start within the
+    # tolerance: its active set makes the solution exact, where the warm-up sweeps or the
+    # last step's impulses leave a complementarity error of the tolerance's size, e.g. an
+    # energy gain of 1e-8 of a colliding disk's kinetic energy; and since a resting
+    # contact's warm start is accepted step after step with an error of the same sign, a
+    # frictionless disk resting on a slab crept into it by 7e-4 h per 1000 steps, spinning
+    # slowly (session 52, benchmarks/long_rest_creep.py; with the polish: none measurable,
+    # and the dense compaction's steps cost the same)
     warmup = _warmup(problem, P, options)
     if warmup is not None:
         P = warmup.impulse
-    polish = warmup is not None
-    result = _newton_then_fallbacks(problem, P, options, polish)
+    result = _newton_then_fallbacks(problem, P, options)
     if warmup is not None:
         result = replace(result, warmup=warmup.iterations,
                          history=warmup.history + result.history)
@@ -205,8 +209,7 @@ def solve(problem: ContactProblem, P0: np.ndarray | None = None,
     # problem of quasi-static squeezes of a free disk between frictional plates, the
     # stalled solves fell from 6 to 0 of 124 at D/h 10, from 3 to 1 of 177 at D/h 20, with
     # 6% and 14% more Newton iterations; with that scale alone 17 of the latter stalled)
-    again = _newton_then_fallbacks(problem, P, replace(options, deformation_scale=True),
-                                   polish)
+    again = _newton_then_fallbacks(problem, P, replace(options, deformation_scale=True))
     gains = [g for g in (result.fallback_gain, again.fallback_gain) if g is not None]
     return replace(_better(result, again), fallback_gain=min(gains) if gains else None)
 
@@ -220,13 +223,13 @@ def _accepted(result: ContactResult, options: ContactSolverOptions) -> bool:
 
 
 def _newton_then_fallbacks(problem: ContactProblem, P: np.ndarray,
-                           options: ContactSolverOptions, polish: bool) -> ContactResult:
-    """The semismooth Newton from P (``polish``: P is the warm-up sweeps'), and where it
+                           options: ContactSolverOptions) -> ContactResult:
+    """The semismooth Newton from P (at least one iteration: polished), and where it
     stalls the fallbacks."""
     frictional = options.tresca and options.fallbacks and bool(np.any(problem.mu > 0.0))
     result = _newton(problem, P, replace(options, max_iterations=min(
         options.max_iterations, FRICTIONAL_NEWTON_ITERATIONS)) if frictional else options,
-        polish=polish)
+        polish=True)
     if _accepted(result, options) or not options.fallbacks:
         return result
     final = _fallbacks(problem, P, result, options, frictional)
@@ -483,8 +486,8 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
     """Semismooth Newton on the Alart–Curnier function from P (Coulomb; with ``threshold``
     the Tresca problem of that fixed friction bound; with ``proximal`` the regularised
     problem w = q + (W + εI) r − ε r_k; in both cases the residual is its own Φ). With
-    ``polish``, at least one iteration even from a P within the tolerance (a start from
-    Gauss–Seidel sweeps: one step on their active set makes the solution exact)."""
+    ``polish``, at least one iteration even from a P within the tolerance (one step on
+    the start's active set makes the solution exact)."""
     n, d = problem.n_contacts, problem.dim
     deformation_scale = options.deformation_scale
     op = _local_operator(problem, deformation_scale)
