@@ -460,6 +460,26 @@ def test_a_warm_up_within_the_tolerance_is_made_exact_by_a_newton_step():
 
 
 @pytest.mark.parametrize("mu", [0.0, 0.5])
+def test_a_warm_start_within_the_tolerance_is_made_exact(mu):
+    """A start already within the tolerance that the warm-up sweeps do not improve (the
+    last step's impulses on a resting contact) is polished by a Newton step too: accepted
+    as it was, its error kept its sign step after step, and a resting disk crept into a
+    slab (session 52, test_relations.py)."""
+    n = 20
+    W = np.eye(2 * n)
+    for c in range(n - 1):
+        W[2 * c, 2 * c + 2] = W[2 * c + 2, 2 * c] = 0.45
+    normal = np.tile([1.0, 0.0], (n, 1))
+    problem = one_body_problem(W, -normal + [0.0, 0.1], normal, mu=mu)
+    exact = solve(problem, None, ContactSolverOptions(tolerance=1e-14)).impulse
+    start = exact * (1.0 + 1e-4)  # within the tolerance, not exact
+    options = ContactSolverOptions(tolerance=1e-2, warmup=0)
+    assert 1e-8 < residual_norm(problem, start) <= options.tolerance
+    result = solve(problem, start, options)
+    assert result.iterations == 1 and residual_norm(problem, result.impulse) <= 1e-12
+
+
+@pytest.mark.parametrize("mu", [0.0, 0.5])
 def test_fallback_sweeps_stop_when_they_stop_making_progress(mu):
     """The last fallback's NSGS_FALLBACK_SWEEPS = 500 sweeps stop after FALLBACK_PATIENCE
     residual evaluations without a 5% better best and return their best iterate (session

@@ -430,7 +430,7 @@ def test_a_resting_disk_does_not_creep_into_the_slab():
     """Issue 11 item 2: over thousands of steps a resting body keeps its gap. A frictionless
     disk (D/h 10, ring seeding) dropped on a slab, 2000 steps of 10 ms: between steps 1000
     and 2000 its least contact gap and its centre's height move by < 2e-5 h. Measured
-    (2026-12-07): no change to 1e-5 h. Before the contact Newton polished every solve
+    (2026-12-07): 1e-10 h and < 1e-8 h. Before the contact Newton polished every solve
     (solvers.solve) the warm start was accepted step after step with an error of the same
     sign: the gap fell 7e-4 h and the centre 4e-4 h per 1000 steps, the disk spinning
     slowly (benchmarks/long_rest_creep.py)."""

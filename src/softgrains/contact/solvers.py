@@ -32,7 +32,10 @@ max_c ‖Φ_c‖ ≤ tolerance · max(max_c ‖P_c‖, the impulse scale of the 
   convex QP's primal-dual path, whose systems stay definite where redundant sites make W
   singular and stall the Newton's active sets), then the sweeps, then the proximal
   point; the interior point only up to INTERIOR_POINT_NONZEROS. Every Newton starts from
-  WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess. The result's
+  WARMUP_SWEEPS Gauss–Seidel sweeps where they improve the initial guess, and takes at
+  least one iteration (a start within the tolerance is polished: its active set makes
+  the solution exact, so a resting contact's warm start does not carry its error from
+  step to step; ``nsgs`` has no such polish). The result's
   ``fallback_gain`` says what the fallbacks gained over the stalled Newton.
   Dimension-generic (the 3D cone's projection is exact).
 - ``nsgs``: nonlinear Gauss–Seidel over contacts with the exact local solution
@@ -531,7 +534,8 @@ def _newton(problem: ContactProblem, P: np.ndarray, options: ContactSolverOption
     history.append(residual)
     best = (residual, r, iterations)
     progress = (merit, iterations)  # the merit at its last real decrease
-    while ((residual > options.tolerance or (polish and iterations == 0))
+    while (((residual > options.tolerance and best[0] > options.tolerance)
+            or (polish and iterations == 0))
            and iterations < options.max_iterations
            and iterations - progress[1] < STAGNATION_ITERATIONS):
         iterations += 1
