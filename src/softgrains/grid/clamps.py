@@ -21,9 +21,9 @@ prescribing some components, keeps its nodes fixed; so does a face between node 
 The kernel surfaces' velocity stencils (contact/surfaces.velocity_stencil) renormalise the
 plain functions over the active nodes with a first-moment correction; in front of one face,
 whose ghost nodes are inactive, that gives the reflected functions again. Points inside a
-box keep their functions: a body reaching into the box has its
-functions change across the face (weights jump by up to 1/8 there), which a clamp whose
-material ends at the face never sees.
+box keep their functions: a body reaching into the box has its functions change across
+the face (weights jump by up to 1/8 there), which a clamp whose material ends at the face
+never sees.
 """
 
 from __future__ import annotations
@@ -44,11 +44,11 @@ def clamp_faces(lattice: Lattice, constraints) -> np.ndarray:
     ghost nodes."""
     d, h, origin = lattice.dim, lattice.h, lattice.node_origin
     rows = []
+    beyond = np.asarray(lattice.n_nodes, dtype=float)
     for box in constraints:
         if not np.all(box.components):
             continue
         # in node units, clipped to just beyond the lattice (a box may reach far past it)
-        beyond = np.asarray(lattice.n_nodes, dtype=float)
         lower = np.clip((np.asarray(box.lower) - origin) / h, -1.0, beyond)
         upper = np.clip((np.asarray(box.upper) - origin) / h, -1.0, beyond)
         first = np.ceil(lower - NODE_PLANE_TOLERANCE).astype(np.int64)
@@ -70,9 +70,9 @@ def reflect_ghost_nodes(x, node_origin, h, base, s, faces, N, dN):
     points x (base: each stencil's first lattice node per axis, width s) for every face,
     for the points on the face or beyond it and, along the other axes, strictly within the
     box's extent (the face's own reach: near a corner the body wraps round, reflecting
-    across both faces would give negative weights and depend on their order). Returns the number
-    of stencil entries moved, or −1 if a ghost's mirror lies outside a point's stencil (a
-    stencil too narrow for the reflection: a defect, not an input)."""
+    across both faces would give negative weights and depend on their order). Returns the
+    number of stencil entries moved, or −1 if a ghost's mirror lies outside a point's
+    stencil (a stencil too narrow for the reflection: a defect, not an input)."""
     n, ns = N.shape
     d = base.shape[1]
     moved = 0
