@@ -416,11 +416,9 @@ class BodyStep:
         solves), where the rotations' inertia alone leaves their compliance
         ill-conditioned. The only one: the projected
         tangent made things worse (session 48: 40 iterations without convergence on the
-        frictional squeeze). Its trade-off (docs/dev-notes.md, #11 next step 2): the
-        frictionless D/h 10 squeeze 5.2 / 12 coupling iterations with it, 7.7 / 47
-        without; on the frictional one the body's step then leaves the torque residual
-        (the defect correction's ratio 1 − c_m I/B ≈ 1), which alternates and grows, one
-        step retried with it or without (session 49). True if it switched."""
+        frictional squeeze). The frictionless D/h 10 squeeze takes 5.2 / 12 coupling
+        iterations with it, 7.7 / 47 without. Once stiffened the direction is the
+        stiffened matrix's own (:meth:`_momentum_direction`). True if it switched."""
         if not self.momentum_form or not self.can_project():
             return False
         self._stiff_rotation = True
@@ -757,11 +755,24 @@ class BodyStep:
     def _momentum_direction(self, A) -> np.ndarray:
         """du = −A⁻¹R with the exact Newton matrix of the momentum form, by defect
         correction from its decoupled symmetric form A (rotations.py), whose
-        factorization is kept for the contacts' compliance."""
+        factorization is kept for the contacts' compliance; once the rotation is stiffened
+        (:meth:`stiffen_rotation`) du = −A_s⁻¹R with that form itself.
+
+        Why not corrected then: the contacts' compliance and the response to their
+        impulses come from A_s, whose stiffened rotation the correction (its ratio
+        1 − c_m I/B ≈ 1 along the rotation) would only partly undo in the direction. The
+        loop's operators then disagreed on the rotation, and its steps alternated in sign
+        and grew ×1.7 an iteration until the motion limit stopped the step (the
+        frictional D/h 10 squeeze retried a step at 0.1 and at 0.05 h a step, at Δt/16;
+        session 52). With the stiffened form alone they agree and the loop converges,
+        linearly in the rotation: no step retried on the squeeze grid."""
         res, rhs = self.result, -self.r.ravel()
         try:
             self._lu = symmetric_factorization(A)
-            du, corrections = corrected_solve(self._exact, self._lu, rhs, self._lu.solve(rhs))
+            du = self._lu.solve(rhs)
+            corrections = 0
+            if not self._stiff_rotation:
+                du, corrections = corrected_solve(self._exact, self._lu, rhs, du)
         except (np.linalg.LinAlgError, RuntimeError) as err:
             raise self._solve_failed(err) from err
         res.linear_method = "direct"
