@@ -41,7 +41,7 @@ def squeeze(run_example, cells_per_diameter: int):
     return np.array(errors), np.array(imbalance)
 
 
-@pytest.mark.slow  # ~8 min with B-splines and walls at the points (2026-12-04): `pytest -m slow`
+@pytest.mark.slow  # ~8 min (2026-12-04), 1 min 44 s (2026-12-07, 1 thread): `pytest -m slow`
 def test_hertz_half_width_within_ten_percent_at_100_cells_per_diameter(run_example):
     errors, imbalance = squeeze(run_example, 100)
     assert len(errors) >= 20  # the window P/(E* R) = 0.004–0.012 is sampled

@@ -467,7 +467,8 @@ class BodyStep:
 
     def _momentum_matrix(self):
         """With the momentum form: the exact (non-symmetric) Newton matrix is kept for the
-        direction's defect correction (:attr:`_exact`) and its symmetric form with the
+        direction's defect correction (:attr:`_exact`; unused once the rotation is
+        stiffened) and its symmetric form with the
         rigid rotations decoupled (rotations.py) is returned: dense up to DENSE_LIMIT
         unknowns, above as its factorization (:class:`DecoupledSparse`)."""
         A = self._exact = self.newton_matrix()
@@ -695,9 +696,13 @@ class BodyStep:
 
     def solve(self) -> None:
         """Newton iterations without contact, until converged (or a SimulationError); with
-        ``tangent = "auto"`` the second half of the iterations uses the projected tangent."""
+        ``tangent = "auto"`` the second half of the iterations uses the projected tangent
+        (not with the momentum form: it has no negative rotation mode to cure, and its
+        stiffened rotation, a remedy for the contacts' compliance, would leave a free
+        body's torque residual to the inertia's ratio c_m I/B alone)."""
         while not self.converged():
-            if self.result.iterations >= self.settings.max_iterations // 2:
+            if (self.result.iterations >= self.settings.max_iterations // 2
+                    and not self.momentum_form):
                 self.use_projected_tangent()
             self.newton_update()
 

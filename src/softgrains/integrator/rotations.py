@@ -14,9 +14,11 @@ factorization and the contacts' compliance is therefore
 
 (R: the rotations as columns) — symmetric, the rotations decoupled from the strain and
 their equation exact — and the exact direction A⁻¹b is reached from it by defect
-correction (:func:`corrected_solve`). (The exact A factorised by LU, with the contacts'
-compliance symmetrised, sent the quasi-static squeeze's disk spinning: the asymmetry
-lives in the rotations' huge compliance. docs/theory.md has the derivation.)
+correction (:func:`corrected_solve`), except once the rotation is stiffened
+(:func:`rotation_stiffness`; BodyStep._momentum_direction). (The exact A factorised by
+LU, with the contacts' compliance symmetrised, sent the quasi-static squeeze's disk
+spinning: the asymmetry lives in the rotations' huge compliance. docs/theory.md has the
+derivation.)
 """
 
 from __future__ import annotations
