@@ -189,3 +189,61 @@ def test_the_default_stress_form_is_the_momentum_form_at_theta_one(settings, exp
     step = BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
                     np.zeros(2), 1e-3, 0)
     assert step.momentum_form == expected
+
+
+def _loaded_disk_step(seed=5):
+    """A BodyStep of the momentum form for a neo-Hookean disk under gravity whose points
+    start pre-strained by random F^n (a loaded grain, as in a dense packing)."""
+    from softgrains import Simulation, load_case
+    from softgrains.integrator.implicit import BodyStep
+
+    sim = Simulation(load_case({
+        "simulation": {"dt": 1e-3, "steps": 1},
+        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
+        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [{"name": "disk", "shape": "disk", "center": [1.0, 1.0], "radius": 0.5,
+                    "material": "gel"}],
+        "output": {"progress": False},
+    }))
+    rng = np.random.default_rng(seed)
+    F = sim.state.F
+    F[:] = np.eye(2) - 0.1 * np.eye(2) + 0.03 * rng.standard_normal(F.shape)
+    sim.state.vol[:] = sim.model.vol0 * np.linalg.det(F)
+    step = BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
+                    np.array([0.0, -9.81]), 1e-3, 0)
+    assert step.momentum_form
+    return step
+
+
+def test_the_one_call_dense_direction_is_the_general_paths():
+    """dense_direction.momentum_direction (the chain of kernels in one GIL-free call) gives
+    the direction, the factorization and the contacts' compliance of the general path
+    (Newton matrix, decoupled dense A_s, Cholesky, defect corrections) to round-off, and
+    newton_direction takes it for a dense body of the momentum form."""
+    step = _loaded_disk_step()
+    du = step.newton_direction(direct=True)
+    assert step._exact is None  # (the one-call path leaves no BSR matrix behind)
+    lower = np.tril(step.factorization().lower)
+    rows = np.arange(0, step.u.shape[0], 7)
+    _, W = step.contact_response(rows, True)
+    G = step.rigid_modes(rows)
+    general = step._momentum_direction(step._matrix())
+    assert step._exact is not None
+    scale = float(np.abs(general).max())
+    assert scale > 0.0
+    np.testing.assert_allclose(du, general, rtol=0.0, atol=1e-12 * scale)
+    np.testing.assert_allclose(lower, np.tril(step.factorization().lower), rtol=1e-13,
+                               atol=1e-13 * float(np.abs(lower).max()))
+    _, W_general = step.contact_response(rows, True)
+    np.testing.assert_allclose(W, W_general, rtol=1e-12, atol=1e-12 * float(np.abs(W).max()))
+    np.testing.assert_array_equal(G, step.rigid_modes(rows))
+
+
+def test_the_one_call_direction_leaves_a_stiffened_rotation_to_the_general_path():
+    """Once the rotation is stiffened from the iterate's stresses the one-call path
+    declines (its block needs them first) and the general path gives the direction."""
+    step = _loaded_disk_step()
+    assert step.stiffen_rotation()
+    assert step._dense_momentum_direction() is None
+    step.newton_direction(direct=True)
+    assert step._exact is not None

@@ -40,6 +40,7 @@ from softgrains.grid.transfers import (
     particles_to_grid,
     restrict_to_active,
 )
+from softgrains.integrator import lapack
 from softgrains.integrator.assembly import (
     add_block_mass,
     add_diagonal,
@@ -52,6 +53,14 @@ from softgrains.integrator.assembly import (
     node_point_map,
     pair_codes,
     point_stresses,
+)
+from softgrains.integrator.dense_direction import (
+    DONE,
+    NewtonPattern,
+    PointTangents,
+    Rotations,
+    StepTerms,
+    momentum_direction,
 )
 from softgrains.integrator.linear_solvers import (
     DENSE_LIMIT,
@@ -472,16 +481,21 @@ class BodyStep:
         rigid rotations decoupled (rotations.py) is returned: dense up to DENSE_LIMIT
         unknowns, above as its factorization (:class:`DecoupledSparse`)."""
         A = self._exact = self.newton_matrix()
+        rotations = self._rigid_rotations()
+        block = self._rotation_block = (
+            rotation_stiffness(rotations, self.Pv, self.c_m, self.s_f)
+            if self._stiff_rotation else self.c_m * rotations.inertia)
+        if A.shape[0] > DENSE_LIMIT:
+            return DecoupledSparse(A, rotations, block)
+        return decoupled_dense(A, rotations, block)
+
+    def _rigid_rotations(self) -> RigidRotations:
+        """The body's rigid rotations about its nodal mass centre (set up once a step)."""
         if self._rotations is None:
             positions = self.stepper.lattice.node_positions(self.box)[self.active]
             self._rotations = RigidRotations.of(positions, self.m[:, 0],
                                                 lambda v: self.mass_times(v).copy())
-        block = self._rotation_block = (
-            rotation_stiffness(self._rotations, self.Pv, self.c_m, self.s_f)
-            if self._stiff_rotation else self.c_m * self._rotations.inertia)
-        if A.shape[0] > DENSE_LIMIT:
-            return DecoupledSparse(A, self._rotations, block)
-        return decoupled_dense(A, self._rotations, block)
+        return self._rotations
 
     # -- the step equations ------------------------------------------------------------
     def mass_times(self, u: np.ndarray) -> np.ndarray:
@@ -744,6 +758,10 @@ class BodyStep:
             return self._direction(direct)
 
     def _direction(self, direct: bool) -> np.ndarray:
+        if self.momentum_form:
+            du = self._dense_momentum_direction()
+            if du is not None:
+                return du
         A = self._A = self._matrix()
         solver, res = self.stepper.solver, self.result
         if self.momentum_form:
@@ -780,6 +798,42 @@ class BodyStep:
                 du, corrections = corrected_solve(self._exact, self._lu, rhs, du)
         except (np.linalg.LinAlgError, RuntimeError) as err:
             raise self._solve_failed(err) from err
+        res.linear_method = "direct"
+        res.linear_iterations += 1 + corrections
+        return du.reshape(self.u.shape)
+
+    def _dense_momentum_direction(self) -> np.ndarray | None:
+        """:meth:`_momentum_direction`'s du for a body up to DENSE_LIMIT unknowns whose
+        rotation is not stiffened, in one call that releases the GIL
+        (dense_direction.momentum_direction: the same kernels in the same order); None
+        where it does not apply or A_s is not positive definite (the general path then)."""
+        n = self.u.size
+        if self._stiff_rotation or n > DENSE_LIMIT:
+            return None
+        rotations = self._rigid_rotations()
+        block = self.c_m * rotations.inertia
+        self.u_box[self.active] = self.u
+        pts = self.pts
+        points = PointTangents(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n, pts.law,
+                               pts.lam, pts.mu, self.Pv, self.Av, self.n_chunks,
+                               self.projected)
+        pattern = NewtonPattern(self.ptr, self.entries, self.slot, self.stepper.codes,
+                                self.indptr, self.indices, self.diag_slot, self.data)
+        terms = StepTerms(float(self.s_f), float(self.c_m), self.consistent,
+                          (self.m * self.c_m).ravel(),
+                          self.m_blocks if self.consistent else np.empty(0),
+                          self.fixed.ravel())
+        lower, du = np.empty((n, n), order="F"), np.empty(n)
+        outcome, corrections = momentum_direction(
+            lapack.DPOTRF, lapack.DPOTRS, points, pattern, terms,
+            Rotations(rotations.fields, rotations.dual, block), -self.r.ravel(),
+            np.empty((n, n)), lower, du)
+        if outcome != DONE:
+            return None
+        self._A_at, self._A, self._exact = self.u, None, None
+        self._rotation_block = block
+        self._lu = DenseCholesky(lower)
+        res = self.result
         res.linear_method = "direct"
         res.linear_iterations += 1 + corrections
         return du.reshape(self.u.shape)
