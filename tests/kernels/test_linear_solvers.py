@@ -14,6 +14,7 @@ from softgrains.integrator.linear_solvers import (
     LinearSolver,
     factorize,
     mirrored_negative_modes,
+    site_columns,
 )
 
 
@@ -229,3 +230,21 @@ def test_the_symmetry_test_on_blocks_agrees_with_the_dense_one():
     assert not shuffled.has_canonical_format
     assert _is_symmetric(shuffled, np.asfortranarray(shuffled.toarray())) == _symmetric(
         np.asfortranarray(shuffled.toarray()), 1e-12)
+
+
+def test_site_columns_place_the_sites_on_the_free_unknowns():
+    """site_columns: column i of E is row i of H (sites × the contact rows' dofs) placed at
+    those dofs among all unknowns, zero at fixed dofs (duplicate CSR entries summed, as
+    toarray does)."""
+    rng = np.random.default_rng(2)
+    H = sp.random(7, 6, density=0.5, format="csr", random_state=rng)
+    H = sp.csr_matrix((np.r_[H.data, 1.5], np.r_[H.indices, 2], np.r_[H.indptr[:-1], H.nnz + 1]),
+                      shape=H.shape)  # a duplicate entry (row 6, column 2)
+    dofs = np.array([9, 3, 4, 11, 0, 7])
+    free = np.ones(12, bool)
+    free[4] = False
+    E = np.full((12, 7), np.nan, order="F")
+    site_columns(dofs, H.indptr, H.indices, H.data, free, E)
+    expected = np.zeros((12, 7))
+    expected[dofs] = H.toarray().T * free[dofs, None]
+    np.testing.assert_array_equal(E, expected)

@@ -247,3 +247,47 @@ def test_the_one_call_direction_leaves_a_stiffened_rotation_to_the_general_path(
     assert step._dense_momentum_direction() is None
     step.newton_direction(direct=True)
     assert step._exact is not None
+
+
+@pytest.mark.parametrize("scale", [1.0, 40.0])
+def test_the_one_call_line_search_is_implicit_line_search(scale):
+    """momentum_line_search.residual_line_search (one GIL-free call) takes the trial that
+    implicit.line_search takes with the momentum form's NaN potential: the full Newton
+    step near the solution, a halved one where the step overshoots (``scale`` 40 blows
+    the direction up)."""
+    from softgrains.integrator.implicit import line_search
+
+    step = _loaded_disk_step()
+    du = scale * step.newton_direction(direct=True)
+    u0, r0 = step.u.copy(), step.r.copy()
+    expected = line_search(u0, du, r0, step.pi, step.internal_force, step.residual,
+                           step.potential, step._threshold)
+    u, r, rnorm, jmin = step._momentum_line_search(du)
+    np.testing.assert_array_equal(u, expected[0])
+    np.testing.assert_array_equal(r, expected[2])
+    assert rnorm == expected[3] and jmin == expected[4]
+    taken = float(np.abs(u - u0).max() / np.abs(du).max())  # the step's α
+    assert (taken == 1.0) == (scale == 1.0)
+
+
+def test_a_body_shared_by_parallel_kernels_keeps_the_general_path(monkeypatch):
+    """The one-call chains run serial kernels: a body at or above PARALLEL_MIN_POINTS
+    points, whose kernels the calling thread's threads share, keeps the general path
+    when the caller has several threads, and takes them on one thread (over_bodies'
+    workers)."""
+    import numba
+
+    from softgrains.integrator import implicit
+
+    step = _loaded_disk_step()
+    monkeypatch.setattr(implicit, "PARALLEL_MIN_POINTS", step.nodes.shape[0])
+    previous = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert step._in_one_call()
+        if numba.config.NUMBA_NUM_THREADS >= 2:
+            numba.set_num_threads(2)
+            assert not step._in_one_call()
+            assert step._dense_momentum_direction() is None
+    finally:
+        numba.set_num_threads(previous)

@@ -568,9 +568,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # the response is the sites' where the body has a site map (Delassus)
             moved = at_sites if delassus and slots.H[slot] is not None else q
             du[body] = du.get(body, 0.0) + s.impulse_move(rows, moved, slots.response[slot])
-        for i, step_u in du.items():
-            steps[i].take_step(motion_bounded_step(steps[i], step_u, settings.motion_limit,
-                                                   step))
+        # each body's line search (its internal forces release the GIL) on the threads
+        over_bodies(lambda i, du=du: steps[i].take_step(motion_bounded_step(
+            steps[i], du[i], settings.motion_limit, step)), list(du))
         P[ws] = result.impulse
         status[ws] = result.status
         if levers is not None:

@@ -228,6 +228,7 @@ class KernelSurface:
         self.radius = KERNEL_RADIUS * step.stepper.lattice.h
         self.cells = PointCells(step.pts.x, self.radius)
         self._own_distance = None
+        self._bounds = None
 
     def own_distance(self) -> np.ndarray:
         """The calibrated distance of each of the body's own points to its surface (< 0
@@ -236,6 +237,13 @@ class KernelSurface:
             value, grad = self.field(self.step.pts.x)
             self._own_distance, _ = calibrated_distance(value, grad, self.radius)
         return self._own_distance
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The least and greatest coordinates of the body's points (once a step)."""
+        if self._bounds is None:
+            x = self.step.pts.x
+            self._bounds = (x.min(axis=0), x.max(axis=0))
+        return self._bounds
 
     def field(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """c and ∇c at x."""
@@ -392,11 +400,29 @@ def _outer_candidates(own: int, other: int, surfaces: dict, spacing: float,
     """Body ``own``'s outer points (d_O > −δ) within ``other``'s box widened by the reach and
     its kernel radius: the points that may meet its surface."""
     O, T = surfaces[own], surfaces[other]
-    x = O.step.pts.x
-    lo, hi = T.step.pts.x.min(axis=0), T.step.pts.x.max(axis=0)
+    lo, hi = T.bounds()
     margin = reach + T.radius
-    near_box = np.flatnonzero(np.all((x > lo - margin) & (x < hi + margin), axis=1))
-    return near_box[O.own_distance()[near_box] > -spacing]
+    return _points_in_box_outside(O.step.pts.x, lo - margin, hi + margin, O.own_distance(),
+                                  -spacing)
+
+
+@njit(cache=True)
+def _points_in_box_outside(x, lo, hi, distance, threshold):
+    """The indices of the points strictly inside the box (lo, hi) whose ``distance`` is
+    above ``threshold``, in order."""
+    n, d = x.shape
+    out = np.empty(n, np.int64)
+    m = 0
+    for p in range(n):
+        inside = True
+        for j in range(d):
+            if not (x[p, j] > lo[j] and x[p, j] < hi[j]):
+                inside = False
+                break
+        if inside and distance[p] > threshold:
+            out[m] = p
+            m += 1
+    return out[:m]
 
 
 def _kernel_surfaces(pairs, steps: dict, surfaces: dict | None) -> dict:

@@ -37,6 +37,7 @@ from softgrains.grid.transfers import (
     UPDATE_PARTICLE_NEWMARK,
     UPDATE_PARTICLE_THETA,
     grid_to_particles,
+    interpolate,
     particles_to_grid,
     restrict_to_active,
 )
@@ -70,7 +71,9 @@ from softgrains.integrator.linear_solvers import (
     dense,
     factorize,
     mirrored_negative_modes,
+    site_columns,
 )
+from softgrains.integrator.momentum_line_search import ResidualTerms, residual_line_search
 from softgrains.integrator.rotations import (
     DecoupledSparse,
     RigidRotations,
@@ -80,7 +83,7 @@ from softgrains.integrator.rotations import (
     symmetric_factorization,
 )
 from softgrains.materials.dispatch import LINEAR_LAW
-from softgrains.threads import threads_for
+from softgrains.threads import PARALLEL_MIN_POINTS, threads_for
 
 ACTIVE_MASS_FRACTION = 1e-4  # lighter nodes (fraction of the heaviest point) are removed
 RESIDUAL_FLOOR_DISPLACEMENT = 1e-10  # in units of h
@@ -579,8 +582,9 @@ class BodyStep:
             E = np.zeros((self.u.size, k * d), order="F")
             E[dofs, np.arange(k * d)] = free[dofs]
         else:
-            E = np.zeros((self.u.size, sites.shape[0]), order="F")
-            E[dofs] = sites.toarray().T * free[dofs, None]
+            E = np.empty((self.u.size, sites.shape[0]), order="F")
+            H = sites.tocsr()
+            site_columns(dofs, H.indptr, H.indices, H.data, free, E)
         factorization = self.factorization()
         if isinstance(factorization, DenseCholesky):
             W = factorization.compliance(E, kappa * w)
@@ -696,7 +700,9 @@ class BodyStep:
         rows), as the step moves them (x_p^{n+1} = x_p^n + u_p)."""
         self.u_box[:] = 0.0
         self.u_box[self.active] = u
-        return np.einsum("pk,pkd->pd", self.N, self.u_box[self.nodes])
+        out = np.empty((self.nodes.shape[0], self.d))
+        interpolate(self.nodes, self.N, self.u_box, out)
+        return out
 
     def worst_point(self, u: np.ndarray) -> tuple[int, float]:
         """(index in the body, J) of the point with the smallest or a non-finite J at the
@@ -808,7 +814,7 @@ class BodyStep:
         (dense_direction.momentum_direction: the same kernels in the same order); None
         where it does not apply or A_s is not positive definite (the general path then)."""
         n = self.u.size
-        if self._stiff_rotation or n > DENSE_LIMIT:
+        if self._stiff_rotation or n > DENSE_LIMIT or not self._in_one_call():
             return None
         rotations = self._rigid_rotations()
         block = self.c_m * rotations.inertia
@@ -852,11 +858,44 @@ class BodyStep:
         compression), the iterate stays and the projected tangent is used from here on."""
         self.result.iterations += 1
         before = (self.u, self.r, self.rnorm, self.jmin, self.pi)
-        self.u, _, self.r, self.rnorm, self.jmin, self.pi = line_search(
-            self.u, du, self.r, self.pi, self.internal_force, self.residual, self.potential,
-            self._threshold)
+        if self._in_one_call():
+            self.u, self.r, self.rnorm, self.jmin = self._momentum_line_search(du)
+        else:
+            self.u, _, self.r, self.rnorm, self.jmin, self.pi = line_search(
+                self.u, du, self.r, self.pi, self.internal_force, self.residual,
+                self.potential, self._threshold)
         if self.jmin <= 0.0 and self.use_projected_tangent():
             self.u, self.r, self.rnorm, self.jmin, self.pi = before
+
+    def _in_one_call(self) -> bool:
+        """Whether the momentum form's per-body chains of kernels run as one call
+        (dense_direction.py, momentum_line_search.py): with the momentum form, on serial
+        kernels, so not for a body that the calling thread's parallel kernels share
+        (threads.threads_for)."""
+        return self.momentum_form and (self.nodes.shape[0] < PARALLEL_MIN_POINTS
+                                       or numba.get_num_threads() == 1)
+
+    def _momentum_line_search(self, du: np.ndarray
+                              ) -> tuple[np.ndarray, np.ndarray, float, float]:
+        """:func:`line_search` for the momentum form (no potential: the residual decides)
+        in one call that releases the GIL (momentum_line_search.py): (u, R, ‖R‖, min J)
+        of the trial taken."""
+        pts = self.pts
+        points = PointTangents(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n, pts.law,
+                               pts.lam, pts.mu, self.Pv, self.Av, self.n_chunks,
+                               self.projected)
+        empty_int = np.empty(0, np.int64)
+        terms = ResidualTerms(
+            float(self.c_m), float(self.s_f), self.b, self.fixed, self.consistent, self.m,
+            self.indptr if self.consistent else empty_int,
+            self.indices if self.consistent else empty_int,
+            self.m_blocks if self.consistent else np.empty(0), self.active, self.ptr,
+            self.entries)
+        u, r = np.empty_like(self.u), np.empty_like(self.u)
+        rnorm, jmin = residual_line_search(points, terms, self.u, du, self.r,
+                                           float(self._threshold), MAX_LINE_SEARCH,
+                                           self.f_int, u, r)
+        return u, r, float(rnorm), float(jmin)
 
     def add_impulses(self, rows: np.ndarray | slice, Q: np.ndarray) -> None:
         """Add impulse changes Q (k, d) at distinct active ``rows`` (a slice: all) to b

@@ -122,6 +122,27 @@ def _is_symmetric(A: sp.spmatrix | np.ndarray, matrix: np.ndarray) -> bool:
     return bool(_symmetric(matrix, SYMMETRY_TOLERANCE))
 
 
+@njit(cache=True, nogil=True)
+def _compliance(trsm, syrk, lower, B, alpha, Y, out):
+    """out ← α (L⁻¹B)ᵀ(L⁻¹B) through Y ← L⁻¹B (B, Y and out Fortran-ordered)."""
+    Y[:, :] = B
+    lapack.lower_solve(trsm, lower, Y)
+    lapack.gram(syrk, Y, alpha, out)
+
+
+@njit(cache=True, nogil=True)
+def site_columns(dofs, indptr, indices, data, free, out):
+    """out[dofs[j], i] = H_ij where dof dofs[j] is free (out zero elsewhere; H the CSR
+    matrix (indptr, indices, data) of a body's contact sites on its contact rows' dofs,
+    out (unknowns × sites) in Fortran order): the sites' columns Hᵀ on the unknowns."""
+    out[:, :] = 0.0
+    for i in range(indptr.shape[0] - 1):
+        for q in range(indptr[i], indptr[i + 1]):
+            dof = dofs[indices[q]]
+            if free[dof]:
+                out[dof, i] += data[q]
+
+
 class DenseCholesky:
     """A = L Lᵀ of a symmetric positive definite A (LAPACK potrf, lower triangle), with
     SuperLU's ``solve(b)`` (potrs) and the half solve ``L⁻¹ B`` (trsm), from which a
@@ -157,10 +178,13 @@ class DenseCholesky:
 
     def compliance(self, B: np.ndarray, alpha: float = 1.0) -> np.ndarray:
         """α Bᵀ A⁻¹ B = α (L⁻¹B)ᵀ(L⁻¹B) (B a matrix), exactly symmetric: the product by
-        BLAS syrk, which forms one triangle (half the work of a general product)."""
-        Y = self.half_solve(B)
-        out = np.empty((Y.shape[1], Y.shape[1]), order="F")
-        lapack.gram(lapack.DSYRK, Y, float(alpha), out)
+        BLAS syrk, which forms one triangle (half the work of a general product); the copy,
+        the half solve and the product in one call that releases the GIL (on the threads
+        of over_bodies the copy alone, made by NumPy, held it for a tenth of the call)."""
+        B = np.asfortranarray(B, float)
+        Y = np.empty(B.shape, order="F")
+        out = np.empty((B.shape[1], B.shape[1]), order="F")
+        _compliance(lapack.DTRSM, lapack.DSYRK, self.lower, B, float(alpha), Y, out)
         return out
 
 
