@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 from threadpoolctl import threadpool_limits
 
@@ -25,6 +26,7 @@ from softgrains.grid.shape_functions import stencil_width
 from softgrains.grid.stencils import BodyStencils, body_stencils
 from softgrains.integrator.implicit import BodyPoints, BodyStep, BodyStepper, BodyStepResult
 from softgrains.model import Model, State
+from softgrains.threads import over_bodies
 
 
 @dataclass
@@ -86,9 +88,13 @@ class Solver:
         reach)."""
         model = self.model
         diag = StepDiagnostics()
-        steps = {b.index: BodyStep(self.steppers[b.index], self.body_points(state, b.index),
-                                   model.gravity, dt, state.step)
-                 for b in model.bodies if b.deformable}
+        deformable = [b.index for b in model.bodies if b.deformable]
+        threads = numba.get_num_threads()
+        # each body's set-up (stencils, P2G, pattern; kernels that release the GIL) and,
+        # below, its G2P on the run's threads
+        steps = dict(zip(deformable, over_bodies(
+            lambda i: BodyStep(self.steppers[i], self.body_points(state, i), model.gravity,
+                               dt, state.step, threads), deformable), strict=True))
         contact = model.contact
         if contact is not None and contact.enabled and len(model.bodies) > 1:
             fields = []
@@ -117,9 +123,11 @@ class Solver:
         else:
             for s in steps.values():
                 s.solve()
+        finished = dict(zip(deformable, over_bodies(lambda i: steps[i].finish(), deformable),
+                            strict=True))
         for body in model.bodies:
             if body.deformable:
-                res = steps[body.index].finish()
+                res = finished[body.index]
                 diag.bodies[body.name] = res
                 diag.newton_iterations = max(diag.newton_iterations, res.iterations)
             else:

@@ -64,7 +64,7 @@ def clamp_faces(lattice: Lattice, constraints) -> np.ndarray:
     return np.array(rows, dtype=np.int64).reshape(-1, 3 + 2 * d)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def reflect_ghost_nodes(x, node_origin, h, base, s, faces, N, dN):
     """Apply the odd reflection of the module docstring to the stencils (N, ∇N) of the
     points x (base: each stencil's first lattice node per axis, width s) for every face,

@@ -44,7 +44,7 @@ def weights_1d(kind, xi, w, dw, inv_h):
     return base
 
 
-@parallel_kernel(cache=True)
+@parallel_kernel(cache=True, nogil=True)
 def compute_stencils(x, origin, h, kind, base, N, dN):
     """For every point: base node (n, d), N (n, s^d) and ∇N (n, s^d, d) at positions x."""
     n, d = x.shape

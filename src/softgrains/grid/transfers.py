@@ -15,7 +15,7 @@ from softgrains.materials.tensor import determinant
 from softgrains.threads import parallel_kernel
 
 
-@parallel_kernel(cache=True)
+@parallel_kernel(cache=True, nogil=True)
 def local_node_indices(base, lower, strides, s, out):
     """Local node index (in the body's box) of every stencil entry: out (n, s^d)."""
     n, d = base.shape
@@ -29,7 +29,7 @@ def local_node_indices(base, lower, strides, s, out):
             out[p, k] = idx
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def restrict_to_active(nodes, N, dN, active_row):
     """Remove inactive nodes from the points' stencils, keeping the interpolation consistent.
 
@@ -70,7 +70,7 @@ def restrict_to_active(nodes, N, dN, active_row):
     return changed
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def particles_to_grid(nodes, N, mass, v, a, n_box, m_I, mv_I, ma_I):
     """Scatter mass, momentum and mass-weighted acceleration to the body's nodes."""
     n, ns = nodes.shape
@@ -132,7 +132,7 @@ UPDATE_PARTICLE_THETA = 2  # v from the point's own displacement, θ-scheme
 UPDATE_PARTICLE_NEWMARK = 3  # v, a from the point's own displacement, Newmark
 
 
-@parallel_kernel(cache=True)
+@parallel_kernel(cache=True, nogil=True)
 def grid_to_particles(nodes, N, dN, u_I, v_old_I, v_new_I, a_new_I, update, params,
                       law, lam, mu, vol0, x, v, a, F, sigma, vol, n_chunks):
     """Move points with the converged nodal solution and update v, a, F, σ, V (in place).

@@ -46,7 +46,7 @@ def pair_codes(s, d):
     return codes
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def block_pattern(active_row, box_shape, s):
     """BSR pattern over active nodes: (indptr, indices, slot[row, code], diag_slot[row]).
 
@@ -251,7 +251,7 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
     return Jmin_chunk.min(), W_chunk.sum()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def node_point_map(nodes, active_row, n_rows):
     """For every active row, the stencil entries (p·ns + k) of the points that touch it.
 

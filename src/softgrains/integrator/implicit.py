@@ -286,7 +286,10 @@ class BodyStep:
     """
 
     def __init__(self, stepper: BodyStepper, pts: BodyPoints, gravity: np.ndarray, dt: float,
-                 step: int) -> None:
+                 step: int, threads: int | None = None) -> None:
+        """``threads``: the run's Numba threads, which set the kernels' point chunks (None:
+        the calling thread's; a BodyStep made on a worker of threads.over_bodies, which has
+        one, keeps the chunks, and so the sums, of one made on the run's thread)."""
         st = self.settings = stepper.settings
         self.stepper, self.pts, self.dt, self.step = stepper, pts, dt, step
         self._projected = False  # tangent = "auto": switched to projected in this step
@@ -334,7 +337,7 @@ class BodyStep:
         self.indptr, self.indices, self.slot, self.diag_slot = block_pattern(
             active_row, self.box.shape, stepper.s)
         self.ptr, self.entries = node_point_map(nodes, active_row, n_act)
-        self.n_chunks = CHUNKS_PER_THREAD * numba.get_num_threads()
+        self.n_chunks = CHUNKS_PER_THREAD * (threads or numba.get_num_threads())
         self.Pv = np.empty((nodes.shape[0], d, d))
         self.Av = np.empty((nodes.shape[0], d, d, d, d))
         self.data = np.empty((self.indices.size, d, d))
