@@ -117,7 +117,9 @@ def over_bodies(function: Callable[[T], R], items: Iterable[T]) -> list[R]:
     (``numba.get_num_threads()`` Python threads, each running its kernels on one thread):
     for per-body work that is independent between bodies and spends its time in calls that
     release the GIL. The results come in the items' order and are those of the serial loop;
-    every item is finished before the first exception in that order is raised. Serial where
+    every item is finished before the first exception in that order is raised (so the
+    items after a failing one have run too: a caller undoes the whole step, not a part of
+    it, as Simulation.step's retry does). Serial where
     the threading layer does not allow concurrent kernels (:func:`concurrent_kernels`)."""
     items = list(items)
     threads = numba.get_num_threads()

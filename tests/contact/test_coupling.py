@@ -744,6 +744,13 @@ def test_the_points_displacements_are_the_nodal_ones_interpolated():
     c = np.array([0.03, -0.02])
     np.testing.assert_allclose(step.point_displacements(np.tile(c, (step.u.shape[0], 1))),
                                np.tile(c, (step.pts.x.shape[0], 1)), atol=1e-14)
+    # any nodal field: Σ_k N_k(x_p) u_{I_k} over each point's own stencil
+    u = np.random.default_rng(4).standard_normal(step.u.shape)
+    u_box = np.zeros((step.box.size, 2))
+    u_box[step.active] = u
+    np.testing.assert_allclose(step.point_displacements(u),
+                               np.einsum("pk,pkd->pd", step.N, u_box[step.nodes]),
+                               rtol=0.0, atol=1e-14)
 
 
 def test_a_body_s_iterate_is_kept_within_the_step_s_motion_limit():

@@ -299,3 +299,23 @@ def test_ring_seeded_disks_meet_at_their_boundaries(diameter_over_h):
     errors = np.array(errors)
     assert np.all(np.abs(errors) < 0.05)
     assert errors.max() - errors.min() < 0.02  # smooth: no corners
+
+
+def test_outer_candidates_are_the_outer_points_in_the_other_bodys_widened_box():
+    """_outer_candidates (a kernel since session 53): the points of one body strictly
+    inside the other's point bounds widened by the reach and its kernel radius whose own
+    surface distance is above −spacing, in order: NumPy's selection."""
+    h = 0.1
+    steps = _body_steps([{"name": "a", "shape": "disk", "center": [1.0, 1.0], "radius": 0.5},
+                         {"name": "b", "shape": "disk", "center": [1.95, 1.3],
+                          "radius": 0.45}], h=h, size=3.0)
+    found = surfaces._kernel_surfaces([(0, 1)], steps, None)
+    for own, other in ((0, 1), (1, 0)):
+        O, T = found[own], found[other]
+        x, y = O.step.pts.x, T.step.pts.x
+        margin = 2 * h + T.radius
+        inside = np.all((x > y.min(axis=0) - margin) & (x < y.max(axis=0) + margin), axis=1)
+        expected = np.flatnonzero(inside & (O.own_distance() > -h / 2))
+        got = surfaces._outer_candidates(own, other, found, h / 2, 2 * h)
+        assert 0 < got.size < x.shape[0]
+        np.testing.assert_array_equal(got, expected)

@@ -38,10 +38,12 @@ import sys, numba, numpy as np
 sys.path.insert(0, {here!r})
 import test_determinism as t
 import softgrains.contact.coupling as coupling
+import softgrains.solver as solver
 import softgrains.threads as threads
 assert numba.get_num_threads() == 2
 shared = t._run()
-coupling.over_bodies = lambda function, items: [function(x) for x in items]
+coupling.over_bodies = solver.over_bodies = lambda function, items: [function(x)
+                                                                     for x in items]
 serial = t._run()
 assert threads._pools, "the bodies were never shared among threads"
 for name in ("x", "v", "a", "F", "sigma", "vol", "body_velocity", "body_offset"):
@@ -53,9 +55,10 @@ print("same")
 
 
 def test_bodies_shared_among_threads_give_the_serial_run_bit_for_bit():
-    """threads.over_bodies runs the coupling loop's per-body work (Newton directions,
-    compliances) on 2 threads; each body's result is its own, so the run is the serial
-    loop's, bit for bit (in a process of its own: the test workers compute on 1 thread)."""
+    """threads.over_bodies runs the per-body work of a step (set-up, Newton directions,
+    compliances, line searches, G2P) on 2 threads; each body's result is its own, so the
+    run is the serial loop's, bit for bit (in a process of its own: the test workers
+    compute on 1 thread)."""
     here = str(Path(__file__).parent)
     env = dict(os.environ, NUMBA_NUM_THREADS="2")
     env.pop("PYTEST_XDIST_WORKER", None)

@@ -124,7 +124,10 @@ def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scr
     rotations decoupled) = L Lᵀ in ``lower`` (n × n, Fortran order; ``scratch`` n × n),
     then the defect corrections du ← du + A_s⁻¹(rhs − A du) (at most CORRECTIONS, while
     they shrink, until one is below CORRECTION_TOLERANCE ‖du‖). Returns (outcome,
-    corrections taken): DONE, INVERTED or INDEFINITE (``lower`` and du then unset)."""
+    corrections taken): DONE, INVERTED or INDEFINITE (du then unset; ``lower``, the
+    pattern's data and the points' Pv and Av overwritten). f^int is not gathered (the
+    general path's Newton matrix wrote f^int(u) into the body's buffer; the residual at u
+    is known)."""
     jmin, _ = _point_stresses(
         points.nodes, points.dN, points.u_box, points.F_n, points.vol_n, points.law,
         points.lam, points.mu, points.Pv, points.Av, True, points.n_chunks,

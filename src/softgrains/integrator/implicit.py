@@ -815,7 +815,8 @@ class BodyStep:
         """:meth:`_momentum_direction`'s du for a body up to DENSE_LIMIT unknowns whose
         rotation is not stiffened, in one call that releases the GIL
         (dense_direction.momentum_direction: the same kernels in the same order); None
-        where it does not apply or A_s is not positive definite (the general path then)."""
+        where it does not apply, A_s is not positive definite or the iterate inverts a
+        point (the general path then)."""
         n = self.u.size
         if self._stiff_rotation or n > DENSE_LIMIT or not self._in_one_call():
             return None

@@ -134,7 +134,8 @@ def _compliance(trsm, syrk, lower, B, alpha, Y, out):
 def site_columns(dofs, indptr, indices, data, free, out):
     """out[dofs[j], i] = H_ij where dof dofs[j] is free (out zero elsewhere; H the CSR
     matrix (indptr, indices, data) of a body's contact sites on its contact rows' dofs,
-    out (unknowns × sites) in Fortran order): the sites' columns Hᵀ on the unknowns."""
+    out (unknowns × sites) in Fortran order): the sites' columns Hᵀ on the unknowns
+    (duplicate entries of H add up, as in H.toarray())."""
     out[:, :] = 0.0
     for i in range(indptr.shape[0] - 1):
         for q in range(indptr[i], indptr[i + 1]):

@@ -80,7 +80,9 @@ def _trial(points, terms, u, f, r, mass_u):
 def residual_line_search(points, terms, u, du, r, enough, max_halvings, f, out_u, out_r):
     """The line search of the module docstring from the iterate u (residual r) along du:
     the taken trial's u and R in out_u and out_r (f: f^int's buffer). Returns (‖R‖ of the
-    trial, or NaN where every trial inverts a point; its smallest J)."""
+    trial, or NaN where no trial is admissible; its smallest J). Where every trial inverts
+    a point, R is formed with f as it came in or as the last trial that did not left it, as
+    implicit.line_search does (the caller refuses that iterate; nothing reads R)."""
     rnorm = _norm(r)
     shape = u.shape
     u_try, r_try, mass_u = np.empty(shape), np.empty(shape), np.empty(shape)
