@@ -47,8 +47,10 @@ INDEFINITE = 2  # A_s is not positive definite: the caller's LU path
 
 
 class PointTangents(NamedTuple):
-    """A body's points and what the tangent needs of them (assembly.point_stresses'
-    arguments; Pv and Av are written)."""
+    """A body's points and what their stresses and tangents need (assembly.point_stresses'
+    arguments; Pv and Av are written). The flags are fields, not constants in the kernels
+    that call point_stresses: a literal argument would make Numba compile a second
+    point_stresses for them (~5 s from a fresh clone, each)."""
 
     nodes: np.ndarray
     dN: np.ndarray
@@ -62,6 +64,8 @@ class PointTangents(NamedTuple):
     Av: np.ndarray
     n_chunks: int
     projected: bool
+    tangent: bool
+    momentum: bool
 
 
 class NewtonPattern(NamedTuple):
@@ -120,7 +124,8 @@ def _bsr_times(indptr, indices, data, x, out):
 def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scratch, lower,
                        du):
     """du = A⁻¹ rhs for the momentum form's Newton matrix A at the iterate in
-    ``points.u_box``: A assembled in ``pattern.data``, A_s (its symmetric form with the
+    ``points.u_box`` (``points.tangent`` and ``points.momentum`` true): A assembled in
+    ``pattern.data``, A_s (its symmetric form with the
     rotations decoupled) = L Lᵀ in ``lower`` (n × n, Fortran order; ``scratch`` n × n),
     then the defect corrections du ← du + A_s⁻¹(rhs − A du) (at most CORRECTIONS, while
     they shrink, until one is below CORRECTION_TOLERANCE ‖du‖). Returns (outcome,
@@ -130,8 +135,8 @@ def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scr
     is known)."""
     jmin, _ = _point_stresses(
         points.nodes, points.dN, points.u_box, points.F_n, points.vol_n, points.law,
-        points.lam, points.mu, points.Pv, points.Av, True, points.n_chunks,
-        points.projected, True)
+        points.lam, points.mu, points.Pv, points.Av, points.tangent, points.n_chunks,
+        points.projected, points.momentum)
     if not jmin > 0.0:
         return INVERTED, 0
     data = pattern.data

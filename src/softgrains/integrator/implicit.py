@@ -826,7 +826,7 @@ class BodyStep:
         pts = self.pts
         points = PointTangents(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n, pts.law,
                                pts.lam, pts.mu, self.Pv, self.Av, self.n_chunks,
-                               self.projected)
+                               self.projected, True, True)
         pattern = NewtonPattern(self.ptr, self.entries, self.slot, self.stepper.codes,
                                 self.indptr, self.indices, self.diag_slot, self.data)
         terms = StepTerms(float(self.s_f), float(self.c_m), self.consistent,
@@ -887,7 +887,7 @@ class BodyStep:
         pts = self.pts
         points = PointTangents(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n, pts.law,
                                pts.lam, pts.mu, self.Pv, self.Av, self.n_chunks,
-                               self.projected)
+                               self.projected, False, True)
         empty_int = np.empty(0, np.int64)
         terms = ResidualTerms(
             float(self.c_m), float(self.s_f), self.b, self.fixed, self.consistent, self.m,

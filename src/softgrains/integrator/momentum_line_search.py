@@ -53,14 +53,16 @@ def _norm(r):
 
 @njit(cache=True, nogil=True)
 def _trial(points, terms, u, f, r, mass_u):
-    """f^int(u) into f (left as it was where u inverts a point) and R(u) into r; returns
+    """(``points``: dense_direction.PointTangents without the tangent, of the momentum
+    form) f^int(u) into f (left as it was where u inverts a point) and R(u) into r; returns
     the smallest J."""
     for a in range(terms.active.shape[0]):
         for i in range(u.shape[1]):
             points.u_box[terms.active[a], i] = u[a, i]
     jmin, _ = _point_stresses(points.nodes, points.dN, points.u_box, points.F_n,
                               points.vol_n, points.law, points.lam, points.mu, points.Pv,
-                              points.Av, False, points.n_chunks, points.projected, True)
+                              points.Av, points.tangent, points.n_chunks, points.projected,
+                              points.momentum)
     if jmin > 0.0:
         _gather_forces(terms.ptr, terms.entries, points.dN, points.Pv, f)
     if terms.consistent:
