@@ -6,8 +6,10 @@ the same steps under several settings, in one process, one after the other.
 
 RUN_DIR is a run folder with checkpoint.h5 and case.toml (e.g. a compaction example
 stopped past 100 σ0). A variant is LABEL or LABEL:KEY=VALUE,KEY=VALUE (case overrides).
-Prints, per variant, seconds a step (mean, median, max), coupling iterations and
-contact-solver iterations a step, and the ratio of its time to the first variant's.
+Prints, per variant, seconds a step (mean, median, max), the process's CPU time over its
+wall time (above 1: the share of the step that ran on a second thread), coupling
+iterations and contact-solver iterations a step, and the ratio of its time to the first
+variant's.
 To compare code versions, run the script from each checkout on the same RUN_DIR, side
 by side with NUMBA_NUM_THREADS=1 (docs/dev-notes.md, "Speed, session 17").
 """
@@ -51,13 +53,16 @@ def time_steps(run: Path, overrides: list[str], steps: int) -> dict:
     with resumed(run, overrides) as sim:
         sim.step()
         seconds, iterations, sweeps = [], [], []
+        cpu = time.process_time()
         for _ in range(steps):
             start = time.perf_counter()
             diag = sim.step()
             seconds.append(time.perf_counter() - start)
             iterations.append(diag.contact.iterations)
             sweeps.append(diag.contact.sweeps)
-    return {"seconds": seconds, "iterations": iterations, "sweeps": sweeps}
+        cpu = time.process_time() - cpu
+    return {"seconds": seconds, "iterations": iterations, "sweeps": sweeps,
+            "cpu_over_wall": cpu / sum(seconds)}
 
 
 def main() -> None:
@@ -68,16 +73,17 @@ def main() -> None:
                         help="LABEL or LABEL:KEY=VALUE,... (default: the run's settings)")
     args = parser.parse_args()
     variants = [_variant(v) for v in (args.variant or ["default"])]
-    print("| variant | s/step mean | median | max | coupling its/step | solver its/step "
-          "| time ratio |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    print("| variant | s/step mean | median | max | CPU/wall | coupling its/step "
+          "| solver its/step | time ratio |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- |")
     first = None
     for label, overrides in variants:
         r = time_steps(args.run, overrides, args.steps)
         mean = statistics.fmean(r["seconds"])
         first = first or mean
         print(f"| {label} | {mean:.2f} | {statistics.median(r['seconds']):.2f} | "
-              f"{max(r['seconds']):.2f} | {statistics.fmean(r['iterations']):.1f} | "
+              f"{max(r['seconds']):.2f} | {r['cpu_over_wall']:.2f} | "
+              f"{statistics.fmean(r['iterations']):.1f} | "
               f"{statistics.fmean(r['sweeps']):.0f} | {mean / first:.2f} |", flush=True)
 
 
