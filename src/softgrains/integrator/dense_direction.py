@@ -160,7 +160,10 @@ def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scr
             lower[i, j] = scratch[i, j]
     if lapack.cholesky(potrf, lower) != 0:
         return INDEFINITE, 0
-    du[:] = rhs
+    # (element loops, not slice assignments or in-place array operators: those took
+    # seconds to compile from a fresh clone)
+    for i in range(n):
+        du[i] = rhs[i]
     lapack.cholesky_solve(potrs, lower, du)
     residual = np.empty(n)
     last = np.inf
@@ -172,7 +175,8 @@ def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scr
         size = np.sqrt(np.sum(residual * residual))
         if size > last:
             return DONE, taken
-        du += residual
+        for i in range(n):
+            du[i] += residual[i]
         if size <= CORRECTION_TOLERANCE * np.sqrt(np.sum(du * du)):
             return DONE, taken + 1
         last = size

@@ -45,6 +45,14 @@ class ResidualTerms(NamedTuple):
     entries: np.ndarray
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _copy(source, target):
+    """target ← source (2-d; an element loop: a slice assignment took seconds to compile)."""
+    for a in range(source.shape[0]):
+        for i in range(source.shape[1]):
+            target[a, i] = source[a, i]
+
+
 @njit(cache=True, nogil=True)
 def _norm(r):
     flat = r.ravel()
@@ -99,16 +107,16 @@ def residual_line_search(points, terms, u, du, r, enough, max_halvings, f, out_u
         if j_try > 0.0:
             n_try = _norm(r_try)
             if np.isfinite(n_try) and n_try <= max((1.0 - 1e-4 * alpha) * rnorm, enough):
-                out_u[:, :] = u_try
-                out_r[:, :] = r_try
+                _copy(u_try, out_u)
+                _copy(r_try, out_r)
                 return n_try, j_try
             if np.isfinite(n_try) and (not have_best or n_try < best_norm):
                 have_best, best_norm, best_j = True, n_try, j_try
-                out_u[:, :] = u_try
-                out_r[:, :] = r_try
+                _copy(u_try, out_u)
+                _copy(r_try, out_r)
         alpha *= 0.5
     if have_best:
         return best_norm, best_j
-    out_u[:, :] = u_try
-    out_r[:, :] = r_try
+    _copy(u_try, out_u)
+    _copy(r_try, out_r)
     return np.nan, j_try
