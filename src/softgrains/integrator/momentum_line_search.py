@@ -55,6 +55,8 @@ def _copy(source, target):
 
 @njit(cache=True, nogil=True)
 def _norm(r):
+    """‖r‖ as np.linalg.norm forms it: √(r·r) by BLAS dot, so the tests' decisions are
+    those of implicit.line_search to the last bit."""
     flat = r.ravel()
     return np.sqrt(np.dot(flat, flat))
 
