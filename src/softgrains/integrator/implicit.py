@@ -823,10 +823,7 @@ class BodyStep:
         rotations = self._rigid_rotations()
         block = self.c_m * rotations.inertia
         self.u_box[self.active] = self.u
-        pts = self.pts
-        points = PointTangents(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n, pts.law,
-                               pts.lam, pts.mu, self.Pv, self.Av, self.n_chunks,
-                               self.projected, True, True)
+        points = self._point_tangents(tangent=True)
         pattern = NewtonPattern(self.ptr, self.entries, self.slot, self.stepper.codes,
                                 self.indptr, self.indices, self.diag_slot, self.data)
         terms = StepTerms(float(self.s_f), float(self.c_m), self.consistent,
@@ -879,15 +876,20 @@ class BodyStep:
         return self.momentum_form and (self.nodes.shape[0] < PARALLEL_MIN_POINTS
                                        or numba.get_num_threads() == 1)
 
+    def _point_tangents(self, tangent: bool) -> PointTangents:
+        """The body's points as the one-call kernels take them (momentum form; with or
+        without the tangent)."""
+        pts = self.pts
+        return PointTangents(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n, pts.law,
+                             pts.lam, pts.mu, self.Pv, self.Av, self.n_chunks, self.projected,
+                             tangent, True)
+
     def _momentum_line_search(self, du: np.ndarray
                               ) -> tuple[np.ndarray, np.ndarray, float, float]:
         """:func:`line_search` for the momentum form (no potential: the residual decides)
         in one call that releases the GIL (momentum_line_search.py): (u, R, ‖R‖, min J)
         of the trial taken."""
-        pts = self.pts
-        points = PointTangents(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n, pts.law,
-                               pts.lam, pts.mu, self.Pv, self.Av, self.n_chunks,
-                               self.projected, False, True)
+        points = self._point_tangents(tangent=False)
         empty_int = np.empty(0, np.int64)
         terms = ResidualTerms(
             float(self.c_m), float(self.s_f), self.b, self.fixed, self.consistent, self.m,
