@@ -68,6 +68,33 @@ def test_tangent_and_force_are_derivatives_of_energy(small_body, kind, law):
         assert np.allclose(K, K.T, atol=1e-9 * np.abs(K).max())
 
 
+@pytest.mark.parametrize("d", [2, 3])
+def test_tangent_gather_matches_the_sum_over_points_in_2d_and_3d(d):
+    """K_(I,i)(J,k) = Σ_p ∇N_I,a (V Ã_p)_iakb ∇N_J,b for random tangents on random stencils
+    (box of 4^d nodes, s = 2, first axis fastest), against np.einsum: the gather's loops
+    over the dimension are compiled for d = 2 and 3 separately (a literal d)."""
+    rng = np.random.default_rng(7 + d)
+    s, shape = 2, np.full(d, 4, np.int64)
+    n_box, ns = int(np.prod(shape)), s**d
+    base = rng.integers(0, 3, size=(9, d))
+    offsets = np.array([[(k // s**j) % s for j in range(d)] for k in range(ns)])
+    strides = np.cumprod(np.r_[1, shape[:-1]])
+    nodes = ((base[:, None, :] + offsets[None]) * strides).sum(axis=2).astype(np.int64)
+    dN = rng.standard_normal((len(base), ns, d))
+    Av = rng.standard_normal((len(base), d, d, d, d))
+    active_row = np.arange(n_box, dtype=np.int64)
+    ptr, entries = node_point_map(nodes, active_row, n_box)
+    indptr, indices, slot, _ = block_pattern(active_row, shape, s)
+    data = np.empty((indices.size, d, d))
+    gather_tangent(ptr, entries, dN, Av, slot, pair_codes(s, d), data)
+    K = sp.bsr_matrix((data, indices, indptr), shape=(d * n_box,) * 2).toarray()
+    expected = np.zeros((n_box, d, n_box, d))
+    blocks = np.einsum("pxa,piakb,pyb->pxiyk", dN, Av, dN)
+    for p in range(len(base)):
+        expected[np.ix_(nodes[p], range(d), nodes[p], range(d))] += blocks[p]
+    assert np.allclose(K, expected.reshape(d * n_box, d * n_box), rtol=1e-12, atol=1e-12)
+
+
 def test_internal_force_of_uniform_stress_sums_to_zero(small_body):
     """Σ_I f_I = −Σ_p V_p σ_p Σ_I ∇N_I = 0: internal forces cannot move the centre of mass."""
     rng = np.random.default_rng(4)

@@ -293,6 +293,42 @@ def gather_forces(ptr, entries, dN, Pv, f):
             f[r, i] = -acc
 
 
+@njit(cache=True, nogil=True)
+def _gather_tangent_row(r, ptr, entries, dN, Av, slot, codes, data, d):
+    """Row r of :func:`gather_tangent` (its blocks zeroed, then summed). Called with d a
+    literal (2 or 3): Numba compiles the loops over the dimension with their bounds known,
+    and this kernel took 2.2× less time than with d read from an array's shape (the
+    same sums in the same order, session 54)."""
+    ns = dN.shape[1]
+    T = np.empty((d, d, d))
+    for c in range(slot.shape[1]):
+        q = slot[r, c]
+        if q >= 0:
+            for i in range(d):
+                for k in range(d):
+                    data[q, i, k] = 0.0
+    for e in range(ptr[r], ptr[r + 1]):
+        p = entries[e] // ns
+        ka = entries[e] % ns
+        for i in range(d):
+            for k in range(d):
+                for b in range(d):
+                    acc = 0.0
+                    for a in range(d):
+                        acc += dN[p, ka, a] * Av[p, i, a, k, b]
+                    T[i, k, b] = acc
+        for kb in range(ns):
+            q = slot[r, codes[ka, kb]]
+            if q < 0:  # column node inactive
+                continue
+            for i in range(d):
+                for k in range(d):
+                    acc = 0.0
+                    for b in range(d):
+                        acc += T[i, k, b] * dN[p, kb, b]
+                    data[q, i, k] += acc
+
+
 @parallel_kernel(cache=True, nogil=True)
 def gather_tangent(ptr, entries, dN, Av, slot, codes, data):
     """BSR data (nnzb, d, d) of K: block (r, c) = Σ_p ∇N_a · (V^n Ã_p) · ∇N_b, row-parallel,
@@ -302,37 +338,12 @@ def gather_tangent(ptr, entries, dN, Av, slot, codes, data):
     Terms that touch an inactive node (mass below the activity threshold) are dropped: such a
     node carries no unknown (its displacement is zero).
     """
-    n_rows = ptr.shape[0] - 1
     d = data.shape[1]
-    ns = dN.shape[1]
-    for r in prange(n_rows):
-        T = np.empty((d, d, d))
-        for c in range(slot.shape[1]):
-            q = slot[r, c]
-            if q >= 0:
-                for i in range(d):
-                    for k in range(d):
-                        data[q, i, k] = 0.0
-        for e in range(ptr[r], ptr[r + 1]):
-            p = entries[e] // ns
-            ka = entries[e] % ns
-            for i in range(d):
-                for k in range(d):
-                    for b in range(d):
-                        acc = 0.0
-                        for a in range(d):
-                            acc += dN[p, ka, a] * Av[p, i, a, k, b]
-                        T[i, k, b] = acc
-            for kb in range(ns):
-                q = slot[r, codes[ka, kb]]
-                if q < 0:  # column node inactive
-                    continue
-                for i in range(d):
-                    for k in range(d):
-                        acc = 0.0
-                        for b in range(d):
-                            acc += T[i, k, b] * dN[p, kb, b]
-                        data[q, i, k] += acc
+    for r in prange(ptr.shape[0] - 1):
+        if d == 2:
+            _gather_tangent_row(r, ptr, entries, dN, Av, slot, codes, data, 2)
+        else:
+            _gather_tangent_row(r, ptr, entries, dN, Av, slot, codes, data, 3)
 
 
 @parallel_kernel(cache=True, nogil=True)
