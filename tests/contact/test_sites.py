@@ -2,10 +2,11 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from softgrains.contact.detection import ContactNodes
 from softgrains.contact.problem import row_impulses
-from softgrains.contact.sites import SideStencils, Slots, _site_map, subset
+from softgrains.contact.sites import SideStencils, Slots, _site_map, _site_rows_of, subset
 
 
 def _contacts_and_stencils(rng, nodal: bool, n: int = 9, d: int = 2):
@@ -79,6 +80,20 @@ def test_restricted_slots_are_the_slots_of_the_chosen_contacts(nodal):
         assert restricted.k_size.tolist() == direct.k_size.tolist()
         for body in expected:
             np.testing.assert_allclose(got[body], expected[body], rtol=1e-13, atol=1e-13)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_site_rows_are_scipys_row_selection(d):
+    """_site_rows_of (the working set's rows of H) gives SciPy's fancy row indexing: the
+    same CSR arrays, index types and shape, sites repeated or out of order included."""
+    H = sp.random(12 * d, 40, density=0.2, format="csr", random_state=d)
+    sites = np.array([3, 0, 7, 11, 3])
+    expected = H[(sites[:, None] * d + np.arange(d)).ravel()]
+    got = _site_rows_of(H, sites, d)
+    assert got.shape == expected.shape
+    for name in ("indptr", "indices", "data"):
+        assert getattr(got, name).dtype == getattr(expected, name).dtype
+        np.testing.assert_array_equal(getattr(got, name), getattr(expected, name))
 
 
 def test_site_map_is_the_sum_of_each_sites_stencil_blocks():

@@ -12,6 +12,7 @@ from softgrains.integrator.assembly import (
     node_point_map,
     pair_codes,
     point_stresses,
+    start_strain_energy,
 )
 from softgrains.materials import lame_parameters
 
@@ -93,6 +94,26 @@ def test_tangent_gather_matches_the_sum_over_points_in_2d_and_3d(d):
     for p in range(len(base)):
         expected[np.ix_(nodes[p], range(d), nodes[p], range(d))] += blocks[p]
     assert np.allclose(K, expected.reshape(d * n_box, d * n_box), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("chunks", [1, 4, 100])
+def test_start_strain_energy_is_the_stress_kernels_energy_at_rest(small_body, chunks):
+    """start_strain_energy (a θ = 1 step's start: no f^int(0)) is point_stresses' energy
+    at u = 0 to the last bit (its serial twin's: the parallel one may sum the chunks in
+    another order), for both laws and any chunking."""
+    rng = np.random.default_rng(5)
+    lat, x, v0, box, nodes, N, dN, s = small_body(1)
+    n = len(x)
+    lam, mu = lame_parameters(1.0e6, 0.3)
+    F_n = np.eye(2) + 0.1 * rng.standard_normal((n, 2, 2))
+    vol_n = v0 * np.linalg.det(F_n)
+    laws = rng.integers(0, 2, n).astype(np.int64)
+    lams, mus = np.full(n, lam), np.full(n, mu)
+    _, energy = point_stresses.serial(nodes, dN, np.zeros((box.size, 2)), F_n, vol_n, laws, lams,
+                                      mus, np.empty((n, 2, 2)), np.empty((n, 2, 2, 2, 2)),
+                                      False, chunks)
+    assert energy > 0.0
+    assert start_strain_energy(F_n, vol_n, laws, lams, mus, chunks) == energy
 
 
 def test_internal_force_of_uniform_stress_sums_to_zero(small_body):

@@ -336,14 +336,13 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                                   settings.normal)
     # a node below a body's activity threshold carries no unknown there: no contact; two
     # kinematic bodies do not interact
-    usable = np.array([int(a) in steps or int(b) in steps
-                       for a, b in zip(contacts.alpha, contacts.beta, strict=True)], bool)
+    deformable = np.fromiter(steps, np.int64, len(steps))
+    usable = np.isin(contacts.alpha, deformable) | np.isin(contacts.beta, deformable)
     for bodies, local in ((contacts.alpha, contacts.local_alpha),
                           (contacts.beta, contacts.local_beta)):
-        for c in range(len(contacts)):
-            s = steps.get(int(bodies[c]))
-            if s is not None and s.active_row[local[c]] < 0:
-                usable[c] = False
+        for body, s in steps.items():
+            on = np.flatnonzero(bodies == body)
+            usable[on[s.active_row[local[on]] < 0]] = False
     contacts = subset(contacts, usable)
     d = lattice.dim
     gaps = np.zeros(len(contacts))

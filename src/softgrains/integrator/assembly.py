@@ -252,6 +252,24 @@ def point_stresses(nodes, dN, u_I, F_n, vol_n, law, lam, mu, Pv, Av, want_tangen
 
 
 @njit(cache=True, nogil=True)
+def start_strain_energy(F_n, vol_n, law, lam, mu, n_chunks):
+    """Σ_p V⁰_p W(F^n_p), V⁰ = V^n/J^n: the strain energy :func:`point_stresses` returns at
+    u = 0 (where F = ΔF F^n = F^n exactly), summed in its chunks as its serial twin sums
+    them, without the stresses (a θ = 1 or Newmark step needs no f^int at its start, only
+    this energy)."""
+    n = F_n.shape[0]
+    n_chunks = max(1, min(n, n_chunks))
+    W_chunk = np.empty(n_chunks)
+    for c in range(n_chunks):
+        energy = 0.0
+        for p in range(c * n // n_chunks, (c + 1) * n // n_chunks):
+            Fn = F_n[p]
+            energy += vol_n[p] / determinant(Fn) * strain_energy(law[p], Fn, lam[p], mu[p])
+        W_chunk[c] = energy
+    return W_chunk.sum()
+
+
+@njit(cache=True, nogil=True)
 def node_point_map(nodes, active_row, n_rows):
     """For every active row, the stencil entries (p·ns + k) of the points that touch it.
 

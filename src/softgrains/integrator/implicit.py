@@ -54,6 +54,7 @@ from softgrains.integrator.assembly import (
     node_point_map,
     pair_codes,
     point_stresses,
+    start_strain_energy,
 )
 from softgrains.integrator.dense_direction import (
     DONE,
@@ -353,7 +354,12 @@ class BodyStep:
             self._Mu = np.empty((n_act, d))
 
         # R(u) = c_m M u − b − s f^int(u) = ∇Π(u),  Π(u) = ½ c_m uᵀMu − b·u + s W(u)
-        f_int_n, _, self.w_int_n = self.internal_force(np.zeros_like(v_n), False)
+        if self.newmark or st.theta == 1.0:  # f^int(0) is not in the step's equations
+            f_int_n = None
+            self.w_int_n = start_strain_energy(self.F_n, self.vol_n, pts.law, pts.lam,
+                                               pts.mu, self.n_chunks)
+        else:
+            f_int_n, _, self.w_int_n = self.internal_force(np.zeros_like(v_n), False)
         # kinetic energy on the points and on the grid at the start (energy bookkeeping);
         # with the consistent mass the step's grid velocity is M_C⁻¹ p_n, not the lumped v_n
         self.kinetic_points_n = 0.5 * float(np.sum(pts.mass[:, None] * pts.v * pts.v))
@@ -368,7 +374,8 @@ class BodyStep:
             self.c_m = 1.0 / (st.theta * dt)
             self.s_f = st.theta * dt
             self.b = (self.c_m * (1.0 - st.theta) * dt + 1.0) * p_n + dt * (
-                (1.0 - st.theta) * (f_int_n + f_ext) + st.theta * f_ext)
+                st.theta * f_ext if f_int_n is None
+                else (1.0 - st.theta) * (f_int_n + f_ext) + st.theta * f_ext)
             u = dt * v_n
         u[fixed] = dt * vbar[fixed]
         self.floor = (RESIDUAL_FLOOR_DISPLACEMENT * stepper.lattice.h * self.c_m
