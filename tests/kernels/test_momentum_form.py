@@ -263,10 +263,14 @@ def test_the_one_call_line_search_is_implicit_line_search(scale, mass_matrix):
     u0, r0 = step.u.copy(), step.r.copy()
     expected = line_search(u0, du, r0, step.pi, step.internal_force, step.residual,
                            step.potential, step._threshold)
-    u, r, rnorm, jmin = step._momentum_line_search(du)
+    u, r, rnorm, jmin, f_int, w_int = step._momentum_line_search(du)
     np.testing.assert_array_equal(u, expected[0])
     np.testing.assert_array_equal(r, expected[2])
     assert jmin == expected[4]
+    if jmin > 0.0:  # the trial's f^int and W, which grid_dissipation takes from it
+        f_at, _, w_at = step.internal_force(u, False)
+        np.testing.assert_array_equal(f_int, f_at)
+        assert w_int == w_at
     assert rnorm == expected[3] or (np.isnan(rnorm) and np.isnan(expected[3]))
     taken = float(np.abs(u - u0).max() / np.abs(du).max())  # the step's α
     assert (taken == 1.0) == (scale == 1.0)
@@ -274,6 +278,20 @@ def test_the_one_call_line_search_is_implicit_line_search(scale, mass_matrix):
         assert jmin <= 0.0 and np.isnan(rnorm)  # every trial inverted: the last one
     if scale == -1.0:
         assert jmin > 0.0 and rnorm > np.linalg.norm(r0)  # no descent: the least ‖R‖
+
+
+def test_the_step_energy_reuses_the_line_searchs_forces_exactly():
+    """grid_dissipation takes f^int and W at the converged u from the last line search
+    (or the step's set-up) instead of evaluating them again: the same value to the bit as
+    with the evaluation, after the set-up and after Newton steps."""
+    step = _loaded_disk_step()
+    for _ in range(3):
+        assert step._forces_at is not None and step._forces_at[0] is step.u
+        reused = step.grid_dissipation()
+        kept, step._forces_at = step._forces_at, None
+        assert step.grid_dissipation() == reused
+        step._forces_at = kept
+        step.take_step(step.newton_direction(direct=True))
 
 
 def test_a_body_shared_by_parallel_kernels_keeps_the_general_path(monkeypatch):

@@ -57,3 +57,21 @@ def test_gradient_matches_finite_difference(kind):
         compute_stencils(xp, origin, h, code, bp, Np, np.empty_like(dN))
         assert np.array_equal(bp, base)
         assert np.allclose((Np - N) / eps, dN[:, :, j], atol=1e-5)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_node_positions_of_a_box_and_of_some_of_its_nodes(d):
+    """Lattice.node_positions: node (i_0, …) of a box at node_origin + h (lower + i), local
+    order axis 0 fastest (np.meshgrid's 'ij' grid raveled in Fortran order), and for
+    chosen local nodes exactly those rows."""
+    from softgrains.grid.lattice import Lattice, NodeBox
+
+    lattice = Lattice.covering(np.full(d, -0.3), np.full(d, 1.0), 0.07)
+    box = NodeBox(np.arange(2, 2 + d), np.arange(3, 3 + d))
+    axes = [lattice.node_origin[j] + lattice.h * (box.lower[j] + np.arange(box.shape[j]))
+            for j in range(d)]
+    grid = np.stack([m.ravel(order="F") for m in np.meshgrid(*axes, indexing="ij")], axis=1)
+    every = lattice.node_positions(box)
+    np.testing.assert_array_equal(every, grid)
+    some = np.array([box.size - 1, 0, 5, 5])
+    np.testing.assert_array_equal(lattice.node_positions(box, some), grid[some])

@@ -144,6 +144,25 @@ def wall_face_normal(shape, x: np.ndarray, hint: np.ndarray | None = None,
 NORMALS = ("difference", "alpha", "beta")
 
 
+@njit(cache=True)
+def _pairs_within(starts, counts):
+    """Every pair (a, b), a < b, of entries within each group of ``counts[g]`` entries from
+    ``starts[g]``, group after group, in order of a, then b."""
+    total = 0
+    for g in range(starts.size):
+        total += counts[g] * (counts[g] - 1) // 2
+    a = np.empty(total, np.int64)
+    b = np.empty(total, np.int64)
+    at = 0
+    for g in range(starts.size):
+        for i in range(starts[g], starts[g] + counts[g]):
+            for j in range(i + 1, starts[g] + counts[g]):
+                a[at] = i
+                b[at] = j
+                at += 1
+    return a, b
+
+
 def find_contact_nodes(lattice: Lattice, fields: list[NodalField],
                        walls: dict | None = None, normal_kind: str = "difference"
                        ) -> ContactNodes:
@@ -169,17 +188,14 @@ def find_contact_nodes(lattice: Lattice, fields: list[NodalField],
     ids, bodies, locals_ = ids[order], bodies[order], locals_[order]
     starts = np.flatnonzero(np.r_[True, ids[1:] != ids[:-1]])
     counts = np.diff(np.r_[starts, ids.size])
-    rows = []
-    for s, c in zip(starts[counts > 1], counts[counts > 1], strict=True):
-        for a in range(s, s + c):
-            for b in range(a + 1, s + c):
-                rows.append((a, b))
-    if not rows:
+    a, b = _pairs_within(starts[counts > 1], counts[counts > 1])
+    if a.size == 0:
         return empty
-    a, b = np.array(rows).T
     ka, kb = bodies[a], bodies[b]
-    g_a = np.array([fields[k].gradient[i] for k, i in zip(ka, locals_[a], strict=True)])
-    g_b = np.array([fields[k].gradient[i] for k, i in zip(kb, locals_[b], strict=True)])
+    # every field's gradients in one array (field k's from offset[k])
+    gradients = np.concatenate([f.gradient for f in fields])
+    offset = np.cumsum([0] + [f.gradient.shape[0] for f in fields[:-1]])
+    g_a, g_b = gradients[offset[ka] + locals_[a]], gradients[offset[kb] + locals_[b]]
     if normal_kind == "alpha":  # α's own outward gradient, reversed
         diff = -g_a
     elif normal_kind == "beta":  # β's own outward gradient
@@ -192,8 +208,8 @@ def find_contact_nodes(lattice: Lattice, fields: list[NodalField],
     keep = length > 1e-12 * scale
     a, b, ka, kb = a[keep], b[keep], ka[keep], kb[keep]
     normal = diff[keep] / length[keep, None]
-    alpha = np.array([fields[k].body for k in ka], dtype=np.int64)
-    beta = np.array([fields[k].body for k in kb], dtype=np.int64)
+    body_of = np.array([f.body for f in fields], dtype=np.int64)
+    alpha, beta = body_of[ka], body_of[kb]
     local_a, local_b = locals_[a], locals_[b]
     grad_a, grad_b = g_a[keep], g_b[keep]
     for wall, shape in (walls or {}).items():

@@ -141,7 +141,7 @@ def lever_moments(sides: SurfaceSides, steps: dict, P: np.ndarray,
 def rotation_basis(step) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(m_I, r_I, J⁻¹): the active nodes' lumped masses, positions about their mass centre
     and the inverse of their polar (2D, 1 × 1) or inertia (3D) moment."""
-    positions = step.stepper.lattice.node_positions(step.box)[step.active]
+    positions = step.stepper.lattice.node_positions(step.box, step.active)
     m = step.m[:, 0]
     r = mass_centred(positions, m)
     polar = float((m * (r * r).sum(axis=1)).sum())

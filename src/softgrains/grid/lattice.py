@@ -43,12 +43,16 @@ class Lattice:
     def dim(self) -> int:
         return len(self.n_nodes)
 
-    def node_positions(self, box: NodeBox) -> np.ndarray:
-        """Positions (n_box_nodes, d) of a box's nodes in local order (axis 0 fastest)."""
-        axes = [self.node_origin[j] + self.h * (box.lower[j] + np.arange(box.shape[j]))
-                for j in range(self.dim)]
-        mesh = np.meshgrid(*axes, indexing="ij")
-        return np.stack([m.ravel(order="F") for m in mesh], axis=1)
+    def node_positions(self, box: NodeBox, local: np.ndarray | None = None) -> np.ndarray:
+        """Positions (n, d) of a box's nodes in local order (axis 0 fastest), or of the
+        local nodes ``local`` only (a body's active ones: computing the whole box and
+        selecting cost ~0.1 ms a body and step)."""
+        rem = np.arange(box.size) if local is None else np.asarray(local, np.int64)
+        positions = np.empty((rem.size, self.dim))
+        for j in range(self.dim):
+            positions[:, j] = self.node_origin[j] + self.h * (box.lower[j] + rem % box.shape[j])
+            rem = rem // box.shape[j]
+        return positions
 
 
 @dataclass(frozen=True)

@@ -257,7 +257,7 @@ class BodyStepper:
         vbar = np.zeros((active.size, d))
         if not self.constraints:
             return fixed, vbar
-        xn = self.lattice.node_positions(box)[active]
+        xn = self.lattice.node_positions(box, active)
         tol = 1e-9 * self.lattice.h
         for c in self.constraints:
             inside = np.all((xn >= c.lower - tol) & (xn <= c.upper + tol), axis=1)
@@ -387,6 +387,8 @@ class BodyStep:
             u[fixed] = dt * vbar[fixed]
             f_int, jmin, w_int = self.internal_force(u, False)
         self.u, self.jmin = u, jmin
+        # (u, f^int(u), W(u)) of the iterate's last evaluation, for grid_dissipation
+        self._forces_at = (u, f_int, w_int)
         self.r = self.residual(u, f_int)
         self.rnorm = self.r0 = float(np.linalg.norm(self.r))
         # the stopping threshold of the last convergence test (residual_ratio)
@@ -505,7 +507,7 @@ class BodyStep:
     def _rigid_rotations(self) -> RigidRotations:
         """The body's rigid rotations about its nodal mass centre (set up once a step)."""
         if self._rotations is None:
-            positions = self.stepper.lattice.node_positions(self.box)[self.active]
+            positions = self.stepper.lattice.node_positions(self.box, self.active)
             self._rotations = RigidRotations.of(positions, self.m[:, 0],
                                                 lambda v: self.mass_times(v).copy())
         return self._rotations
@@ -702,7 +704,7 @@ class BodyStep:
 
     def _node_and_point(self, row: int) -> tuple[np.ndarray, int]:
         """Position of active ``row``'s node and the body's point nearest to it."""
-        node = self.stepper.lattice.node_positions(self.box)[self.active[row]]
+        node = self.stepper.lattice.node_positions(self.box, self.active[row:row + 1])[0]
         return node, int(np.argmin(np.sum((self.pts.x - node) ** 2, axis=1)))
 
     def point_displacements(self, u: np.ndarray) -> np.ndarray:
@@ -865,15 +867,17 @@ class BodyStep:
         when every trial inverts a point (an indefinite exact-tangent Newton matrix under
         compression), the iterate stays and the projected tangent is used from here on."""
         self.result.iterations += 1
-        before = (self.u, self.r, self.rnorm, self.jmin, self.pi)
+        before = (self.u, self.r, self.rnorm, self.jmin, self.pi, self._forces_at)
         if self._in_one_call():
-            self.u, self.r, self.rnorm, self.jmin = self._momentum_line_search(du)
+            self.u, self.r, self.rnorm, self.jmin, f_int, w_int = self._momentum_line_search(du)
+            self._forces_at = (self.u, f_int, w_int)
         else:
             self.u, _, self.r, self.rnorm, self.jmin, self.pi = line_search(
                 self.u, du, self.r, self.pi, self.internal_force, self.residual,
                 self.potential, self._threshold)
+            self._forces_at = None
         if self.jmin <= 0.0 and self.use_projected_tangent():
-            self.u, self.r, self.rnorm, self.jmin, self.pi = before
+            self.u, self.r, self.rnorm, self.jmin, self.pi, self._forces_at = before
 
     def _in_one_call(self) -> bool:
         """Whether the momentum form's per-body chains of kernels run as one call
@@ -892,10 +896,11 @@ class BodyStep:
                              tangent, True)
 
     def _momentum_line_search(self, du: np.ndarray
-                              ) -> tuple[np.ndarray, np.ndarray, float, float]:
+                              ) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray,
+                                         float]:
         """:func:`line_search` for the momentum form (no potential: the residual decides)
-        in one call that releases the GIL (momentum_line_search.py): (u, R, ‖R‖, min J)
-        of the trial taken."""
+        in one call that releases the GIL (momentum_line_search.py): (u, R, ‖R‖, min J,
+        f^int, W) of the trial taken."""
         points = self._point_tangents(tangent=False)
         empty_int = np.empty(0, np.int64)
         terms = ResidualTerms(
@@ -904,11 +909,11 @@ class BodyStep:
             self.indices if self.consistent else empty_int,
             self.m_blocks if self.consistent else np.empty(0), self.active, self.ptr,
             self.entries)
-        u, r = np.empty_like(self.u), np.empty_like(self.u)
-        rnorm, jmin = residual_line_search(points, terms, self.u, du, self.r,
-                                           float(self._threshold), MAX_LINE_SEARCH,
-                                           self.f_int, u, r)
-        return u, r, float(rnorm), float(jmin)
+        u, r, f_int = np.empty_like(self.u), np.empty_like(self.u), np.empty_like(self.u)
+        rnorm, jmin, w_int = residual_line_search(points, terms, self.u, du, self.r,
+                                                  float(self._threshold), MAX_LINE_SEARCH,
+                                                  self.f_int, u, r, f_int)
+        return u, r, float(rnorm), float(jmin), f_int, float(w_int)
 
     def add_impulses(self, rows: np.ndarray | slice, Q: np.ndarray) -> None:
         """Add impulse changes Q (k, d) at distinct active ``rows`` (a slice: all) to b
@@ -965,7 +970,10 @@ class BodyStep:
         the strain energy over the step (0 for θ = ½ and a quadratic energy; ≥ 0 for θ = 1
         and a convex one). Tests: tests/validation/test_energy.py."""
         u, dt = self.u, self.dt
-        f_int, _, w_int = self.internal_force(u, False)
+        if self._forces_at is not None and self._forces_at[0] is u:  # the line search's
+            _, f_int, w_int = self._forces_at
+        else:
+            f_int, _, w_int = self.internal_force(u, False)
         reaction = self.c_m * self.mass_times(u) - self.b - self.s_f * f_int
         if self.consistent:  # θ only: v^{n+1} = (u/Δt − (1 − θ) v^n)/θ with v^n = M_C⁻¹ p_n
             theta = self.settings.theta

@@ -66,11 +66,11 @@ def _trial(points, terms, u, f, r, mass_u):
     """(Inlined: compiled on its own it linked point_stresses into a second library,
     +2.5 s of compilation from a fresh clone. ``points``: dense_direction.PointTangents
     without the tangent, of the momentum form.) f^int(u) into f (left as it was where u
-    inverts a point) and R(u) into r; returns the smallest J."""
+    inverts a point) and R(u) into r; returns the smallest J and the strain energy W(u)."""
     for a in range(terms.active.shape[0]):
         for i in range(u.shape[1]):
             points.u_box[terms.active[a], i] = u[a, i]
-    jmin, _ = _point_stresses(points.nodes, points.dN, points.u_box, points.F_n,
+    jmin, energy = _point_stresses(points.nodes, points.dN, points.u_box, points.F_n,
                               points.vol_n, points.law, points.lam, points.mu, points.Pv,
                               points.Av, points.tangent, points.n_chunks, points.projected,
                               points.momentum)
@@ -86,39 +86,44 @@ def _trial(points, terms, u, f, r, mass_u):
         for i in range(u.shape[1]):
             r[a, i] = 0.0 if terms.fixed[a, i] else (
                 terms.c_m * mass_u[a, i] - terms.b[a, i] - terms.s_f * f[a, i])
-    return jmin
+    return jmin, energy
 
 
 @njit(cache=True, nogil=True)
-def residual_line_search(points, terms, u, du, r, enough, max_halvings, f, out_u, out_r):
+def residual_line_search(points, terms, u, du, r, enough, max_halvings, f, out_u, out_r,
+                         out_f):
     """The line search of the module docstring from the iterate u (residual r) along du:
-    the taken trial's u and R in out_u and out_r (f: f^int's buffer). Returns (‖R‖ of the
-    trial, or NaN where no trial is admissible; its smallest J). Where every trial inverts
-    a point, R is formed with f as it came in or as the last trial that did not left it, as
-    implicit.line_search does (the caller refuses that iterate; nothing reads R)."""
+    the taken trial's u, R and f^int in out_u, out_r and out_f (f: f^int's buffer).
+    Returns (‖R‖ of the trial, or NaN where no trial is admissible; its smallest J; its
+    strain energy W). Where every trial inverts a point, R is formed with f as it came in
+    or as the last trial that did not left it, as implicit.line_search does (the caller
+    refuses that iterate; nothing reads R, f^int or W)."""
     rnorm = _norm(r)
     shape = u.shape
     u_try, r_try, mass_u = np.empty(shape), np.empty(shape), np.empty(shape)
-    have_best, best_norm, best_j = False, np.inf, 0.0
-    alpha, j_try = 1.0, 0.0
+    have_best, best_norm, best_j, best_w = False, np.inf, 0.0, np.nan
+    alpha, j_try, w_try = 1.0, 0.0, np.nan
     for _ in range(max_halvings + 1):
         for a in range(shape[0]):
             for i in range(shape[1]):
                 u_try[a, i] = u[a, i] + alpha * du[a, i]
-        j_try = _trial(points, terms, u_try, f, r_try, mass_u)
+        j_try, w_try = _trial(points, terms, u_try, f, r_try, mass_u)
         if j_try > 0.0:
             n_try = _norm(r_try)
             if np.isfinite(n_try) and n_try <= max((1.0 - 1e-4 * alpha) * rnorm, enough):
                 _copy(u_try, out_u)
                 _copy(r_try, out_r)
-                return n_try, j_try
+                _copy(f, out_f)
+                return n_try, j_try, w_try
             if np.isfinite(n_try) and (not have_best or n_try < best_norm):
-                have_best, best_norm, best_j = True, n_try, j_try
+                have_best, best_norm, best_j, best_w = True, n_try, j_try, w_try
                 _copy(u_try, out_u)
                 _copy(r_try, out_r)
+                _copy(f, out_f)
         alpha *= 0.5
     if have_best:
-        return best_norm, best_j
+        return best_norm, best_j, best_w
     _copy(u_try, out_u)
     _copy(r_try, out_r)
-    return np.nan, j_try
+    _copy(f, out_f)
+    return np.nan, j_try, np.nan
