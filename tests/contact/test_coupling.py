@@ -753,6 +753,34 @@ def test_the_points_displacements_are_the_nodal_ones_interpolated():
                                rtol=0.0, atol=1e-14)
 
 
+def test_the_points_motion_kernel_is_the_interpolated_displacements_bound():
+    """coupling._points_motion (one pass over the points) gives what point_displacements
+    and largest_step_within give on random nodal fields: max |a_p|², the largest α and
+    max |a_p + b_p|², to the bit."""
+    from softgrains.contact.coupling import _points_motion, largest_step_within
+
+    step = _disk_step()
+    rng = np.random.default_rng(11)
+    alphas = []
+    for scale in (0.01, 0.05, 0.2):
+        u = scale * rng.standard_normal(step.u.shape)
+        du = scale * rng.standard_normal(step.u.shape)
+        a, b = step.point_displacements(u), step.point_displacements(du)
+        limit = 0.1
+        most_a, alpha, most_reach = _points_motion(step.nodes, step.N, step.active_row, u,
+                                                   du, limit)
+        assert most_a == (a * a).sum(axis=1).max()
+        assert most_reach == ((a + b) ** 2).sum(axis=1).max()
+        assert alpha == largest_step_within(a, b, limit)
+        # the quadratic's root per leaving row, in NumPy
+        aa, ab, bb = (a * a).sum(axis=1), (a * b).sum(axis=1), (b * b).sum(axis=1)
+        leaving = (aa + 2.0 * ab + bb > limit * limit) & (bb > 0.0)
+        roots = (-ab + np.sqrt(np.maximum(ab * ab - bb * (aa - limit * limit), 0.0))) / bb
+        assert alpha == (np.clip(roots[leaving].min(), 0.0, 1.0) if leaving.any() else 1.0)
+        alphas.append(alpha)
+    assert min(alphas) < 1.0 and max(alphas) == 1.0
+
+
 def test_a_body_s_iterate_is_kept_within_the_step_s_motion_limit():
     """coupling.motion_bounded_step: a step that would carry a point past the limit is
     shortened to reach it; from the limit, a step leading out stops the step with the
