@@ -319,3 +319,33 @@ def test_outer_candidates_are_the_outer_points_in_the_other_bodys_widened_box():
         got = surfaces._outer_candidates(own, other, found, h / 2, 2 * h)
         assert 0 < got.size < x.shape[0]
         np.testing.assert_array_equal(got, expected)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_surface_gaps_are_the_array_functions_composed(d):
+    """surfaces.surface_gaps (one kernel) gives what calibrated_distance, the normal
+    −∇c/‖∇c‖ and edge_gap give on arrays, across the profile, beyond the kernel's reach
+    (c = 0: +inf) and where ∇c vanishes (NaN): to the bit in 2D; in 3D to round-off
+    (np.einsum sums three products in another order)."""
+    rng = np.random.default_rng(20 + d)
+    n, radius, spacing = 400, 0.015, 0.005
+    c = rng.uniform(-0.1, 1.1, n).clip(0.0, 1.0)
+    c[:5] = 0.0
+    grad = rng.standard_normal((n, d)) * 40.0
+    grad[5:8] = 0.0
+    F = np.eye(d) + 0.2 * rng.standard_normal((n, d, d))
+    length, n_out, gap, support = surfaces.surface_gaps(c, grad, F, radius, spacing)
+    distance, lam = surfaces.calibrated_distance(c, grad, radius)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        expected_n = -grad / np.linalg.norm(grad, axis=1)[:, None]
+        expected_gap, expected_support = surfaces.edge_gap(distance, expected_n, F, spacing,
+                                                           True)
+        expected_gap /= lam
+    tolerance = 0.0 if d == 2 else 1e-14
+    for got, expected in ((length, np.linalg.norm(grad, axis=1)), (n_out, expected_n),
+                          (gap, expected_gap), (support, expected_support)):
+        finite = np.isfinite(expected)
+        scale = np.abs(expected[finite]).max()
+        np.testing.assert_allclose(got, expected, rtol=tolerance, atol=tolerance * scale)
+    assert np.isinf(gap[:5]).all() and np.isnan(gap[5:8]).all()
+    assert np.isfinite(gap[8:]).sum() > n // 2

@@ -28,9 +28,9 @@ from numba import njit
 from softgrains.contact.surfaces import (
     KernelSurface,
     SurfaceContacts,
-    calibrated_distance,
     edge_gap,
     shape_distance,
+    surface_gaps,
 )
 from softgrains.geometry.shapes import translated
 
@@ -100,10 +100,7 @@ def end_gaps(sc: SurfaceContacts, steps: dict, walls: dict, spacing: float,
         if t in steps:  # T's kernel surface, from its moved points
             surface = KernelSurface(SimpleNamespace(pts=moved[t], stepper=steps[t].stepper))
             c, grad = surface.field(x)
-            distance, lam = calibrated_distance(c, grad, surface.radius)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                n_out = -grad / np.linalg.norm(grad, axis=1)[:, None]
-                gap[which] = edge_gap(distance, n_out, F, spacing, True)[0] / lam
+            gap[which] = surface_gaps(c, grad, F, surface.radius, spacing)[2]
         else:  # a kinematic wall, moved by Δt v
             velocity, shape = walls[t]
             distance, n_out = shape_distance(translated(shape, dt * np.asarray(velocity)), x)

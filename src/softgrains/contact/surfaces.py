@@ -452,13 +452,61 @@ def _gaps_against(T: KernelSurface, x: np.ndarray, F: np.ndarray, spacing: float
     outward normal n_T, the gap g = (d_T(x) − e)/λ (the distance to T's surface less the
     point's half cell, per unit of its rate n·(v_O − v_T)) and the cell's support r."""
     c, grad = T.field(x)
-    length = np.linalg.norm(grad, axis=1)
-    distance, lam = calibrated_distance(c, grad, T.radius)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        n_out = -grad / length[:, None]
-        gap, support = edge_gap(distance, n_out, F, spacing, True)
-        gap /= lam
-    return c, length, n_out, gap, support
+    return (c, *surface_gaps(c, grad, F, T.radius, spacing))
+
+
+def surface_gaps(c: np.ndarray, grad: np.ndarray, F: np.ndarray, radius: float,
+                 spacing: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """From a kernel surface's field c and ∇c at points of deformation gradients F: ‖∇c‖,
+    the outward normal n = −∇c/‖∇c‖, the gap (d − e)/λ of :func:`calibrated_distance` and
+    :func:`edge_gap` (round cells) and the cells' support r, in one kernel (NaN gap and
+    normal where ∇c = 0; +inf where c = 0)."""
+    xi, profile, slope = PROFILES[grad.shape[1]]
+    n, d = grad.shape
+    length, n_out = np.empty(n), np.empty((n, d))
+    gap, support = np.empty(n), np.empty((n, d))
+    _gaps_from_field(np.ascontiguousarray(c, float), np.ascontiguousarray(grad, float),
+                     np.ascontiguousarray(F, float), float(radius), xi, profile, slope,
+                     float(spacing), length, n_out, gap, support)
+    return length, n_out, gap, support
+
+
+@njit(cache=True, error_model="numpy")
+def _gaps_from_field(c, grad, F, radius, xi, profile, slope, spacing, length, n_out, gap,
+                     support):
+    """:func:`surface_gaps`, point by point, with the same operations in the same order as
+    calibrated_distance, cell_support and edge_gap on arrays (NumPy's error model: 0/0 is
+    NaN, as there)."""
+    n, d = grad.shape
+    low, high = profile[1], profile[-2]
+    FTn = np.empty(d)
+    for p in range(n):
+        total = 0.0
+        for i in range(d):
+            total += grad[p, i] * grad[p, i]
+        length[p] = np.sqrt(total)
+        inside = np.interp(min(max(c[p], low), high), profile, xi)
+        lam = radius * length[p] / np.interp(inside, xi, slope)
+        distance = -radius * inside if c[p] > 0.0 else np.inf
+        for i in range(d):
+            n_out[p, i] = -grad[p, i] / length[p]
+        size = 0.0
+        for i in range(d):
+            acc = 0.0
+            for j in range(d):
+                nj = n_out[p, j]
+                acc += F[p, j, i] * (0.0 if np.isnan(nj) else nj)
+            FTn[i] = acc
+            size += acc * acc
+        size = max(np.sqrt(size), 1e-300)
+        along = 0.0
+        for i in range(d):
+            acc = 0.0
+            for j in range(d):
+                acc += F[p, i, j] * (FTn[j] / size)
+            support[p, i] = -0.5 * spacing * acc
+            along += n_out[p, i] * support[p, i]
+        gap[p] = (distance + along) / lam
 
 
 def least_unsampled_gap(one_pass: frozenset, steps: dict, spacing: float, reach: float,

@@ -870,7 +870,7 @@ class BodyStep:
         before = (self.u, self.r, self.rnorm, self.jmin, self.pi, self._forces_at)
         if self._in_one_call():
             self.u, self.r, self.rnorm, self.jmin, f_int, w_int = self._momentum_line_search(du)
-            self._forces_at = (self.u, f_int, w_int)
+            self._forces_at = (self.u, f_int, w_int) if self.jmin > 0.0 else None
         else:
             self.u, _, self.r, self.rnorm, self.jmin, self.pi = line_search(
                 self.u, du, self.r, self.pi, self.internal_force, self.residual,
