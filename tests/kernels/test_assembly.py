@@ -7,6 +7,7 @@ import scipy.sparse as sp
 
 from softgrains.integrator.assembly import (
     block_pattern,
+    dimension,
     gather_forces,
     gather_tangent,
     node_point_map,
@@ -15,6 +16,8 @@ from softgrains.integrator.assembly import (
     start_strain_energy,
 )
 from softgrains.materials import lame_parameters
+
+TWO_D = dimension(2)
 
 
 @pytest.mark.parametrize("kind", [0, 1], ids=["linear", "bspline2"])
@@ -38,15 +41,18 @@ def test_tangent_and_force_are_derivatives_of_energy(small_body, kind, law):
     ptr, entries = node_point_map(nodes, active_row, touched.size)
 
     def force(u):
-        point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, False, 4)
+        point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, False, 4, False,
+                       False, TWO_D)
         f = np.empty((touched.size, 2))
         gather_forces(ptr, entries, dN, Pv, f)
         return f.ravel()
 
     def energy(u):
-        return point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, False, 4)[1]
+        return point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, False, 4,
+                              False, False, TWO_D)[1]
 
-    point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, True, 4)
+    point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, True, 4, False, False,
+                   TWO_D)
     indptr, indices, slot, _ = block_pattern(active_row, box.shape, s)
     data = np.empty((indices.size, 2, 2))
     gather_tangent(ptr, entries, dN, Av, slot, pair_codes(s, 2), data)
@@ -111,7 +117,7 @@ def test_start_strain_energy_is_the_stress_kernels_energy_at_rest(small_body, ch
     lams, mus = np.full(n, lam), np.full(n, mu)
     _, energy = point_stresses.serial(nodes, dN, np.zeros((box.size, 2)), F_n, vol_n, laws, lams,
                                       mus, np.empty((n, 2, 2)), np.empty((n, 2, 2, 2, 2)),
-                                      False, chunks)
+                                      False, chunks, False, False, TWO_D)
     assert energy > 0.0
     assert start_strain_energy(F_n, vol_n, laws, lams, mus, chunks) == energy
 
@@ -126,7 +132,7 @@ def test_internal_force_of_uniform_stress_sums_to_zero(small_body):
     Pv = np.empty((n, 2, 2))
     point_stresses(nodes, dN, np.zeros((box.size, 2)), F_n, v0 * np.linalg.det(F_n),
                    np.zeros(n, dtype=np.int64), np.full(n, lam), np.full(n, mu), Pv,
-                   np.empty((n, 2, 2, 2, 2)), False, 4)
+                   np.empty((n, 2, 2, 2, 2)), False, 4, False, False, TWO_D)
     active_row = np.arange(box.size)
     ptr, entries = node_point_map(nodes, active_row, box.size)
     f = np.empty((box.size, 2))

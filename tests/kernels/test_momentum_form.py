@@ -11,6 +11,7 @@ import scipy.sparse as sp
 
 from softgrains.integrator.assembly import (
     block_pattern,
+    dimension,
     gather_forces,
     gather_tangent,
     node_point_map,
@@ -50,14 +51,14 @@ def _loaded_body(small_body, seed=3):
 
     def force(u, momentum):
         point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, False, 4, False,
-                       momentum)
+                       momentum, dimension(2))
         f = np.empty((touched.size, 2))
         gather_forces(ptr, entries, dN, Pv, f)
         return f
 
     def tangent(u, momentum):
         point_stresses(nodes, dN, u, F_n, vol_n, laws, lams, mus, Pv, Av, True, 4, False,
-                       momentum)
+                       momentum, dimension(2))
         indptr, indices, slot, _ = block_pattern(active_row, box.shape, s)
         data = np.empty((indices.size, 2, 2))
         gather_tangent(ptr, entries, dN, Av, slot, pair_codes(s, 2), data)

@@ -66,6 +66,7 @@ class PointTangents(NamedTuple):
     projected: bool
     tangent: bool
     momentum: bool
+    dims: tuple  # assembly.dimension(d)
 
 
 class NewtonPattern(NamedTuple):
@@ -136,7 +137,7 @@ def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scr
     jmin, _ = _point_stresses(
         points.nodes, points.dN, points.u_box, points.F_n, points.vol_n, points.law,
         points.lam, points.mu, points.Pv, points.Av, points.tangent, points.n_chunks,
-        points.projected, points.momentum)
+        points.projected, points.momentum, points.dims)
     if not jmin > 0.0:
         return INVERTED, 0
     data = pattern.data

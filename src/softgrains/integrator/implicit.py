@@ -48,6 +48,7 @@ from softgrains.integrator.assembly import (
     block_pattern,
     block_scalar_matvec,
     constrain,
+    dimension,
     gather_consistent_mass,
     gather_forces,
     gather_tangent,
@@ -528,7 +529,7 @@ class BodyStep:
             jmin, w_int = point_stresses(self.nodes, self.dN, self.u_box, self.F_n,
                                          self.vol_n, pts.law, pts.lam, pts.mu, self.Pv,
                                          self.Av, want_tangent, self.n_chunks, self.projected,
-                                         self.momentum_form)
+                                         self.momentum_form, dimension(self.d))
             if jmin > 0.0:
                 gather_forces(self.ptr, self.entries, self.dN, self.Pv, self.f_int)
                 if want_tangent:
@@ -893,7 +894,7 @@ class BodyStep:
         pts = self.pts
         return PointTangents(self.nodes, self.dN, self.u_box, self.F_n, self.vol_n, pts.law,
                              pts.lam, pts.mu, self.Pv, self.Av, self.n_chunks, self.projected,
-                             tangent, True)
+                             tangent, True, dimension(self.d))
 
     def _momentum_line_search(self, du: np.ndarray
                               ) -> tuple[np.ndarray, np.ndarray, float, float, np.ndarray,

@@ -73,7 +73,7 @@ def _trial(points, terms, u, f, r, mass_u):
     jmin, energy = _point_stresses(points.nodes, points.dN, points.u_box, points.F_n,
                               points.vol_n, points.law, points.lam, points.mu, points.Pv,
                               points.Av, points.tangent, points.n_chunks, points.projected,
-                              points.momentum)
+                              points.momentum, points.dims)
     if jmin > 0.0:
         _gather_forces(terms.ptr, terms.entries, points.dN, points.Pv, f)
     if terms.consistent:
