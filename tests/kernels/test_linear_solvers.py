@@ -15,6 +15,7 @@ from softgrains.integrator.linear_solvers import (
     factorize,
     mirrored_negative_modes,
     site_columns,
+    sparse_times,
 )
 
 
@@ -248,3 +249,12 @@ def test_site_columns_place_the_sites_on_the_free_unknowns():
     expected = np.zeros((12, 7))
     expected[dofs] = H.toarray().T * free[dofs, None]
     np.testing.assert_array_equal(E, expected)
+
+
+def test_sparse_times_is_scipys_product_to_the_bit():
+    """linear_solvers.sparse_times (BodyStep.rigid_modes' products without SciPy's
+    dispatch): H X as SciPy forms it, to the bit."""
+    rng = np.random.default_rng(12)
+    H = sp.random(30, 50, density=0.15, format="csr", random_state=3)
+    X = rng.standard_normal((50, 3))
+    np.testing.assert_array_equal(sparse_times(H, X), H @ X)

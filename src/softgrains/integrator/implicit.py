@@ -74,6 +74,7 @@ from softgrains.integrator.linear_solvers import (
     factorize,
     mirrored_negative_modes,
     site_columns,
+    sparse_times,
 )
 from softgrains.integrator.momentum_line_search import ResidualTerms, residual_line_search
 from softgrains.integrator.rotations import (
@@ -630,12 +631,13 @@ class BodyStep:
         kappa, _ = self.velocity_affine()
         scale = kappa * self.impulse_weight
         translations = np.tile(np.eye(d), (rows.size, 1))  # (rows d, d): g_a at the rows
-        at_sites = translations if sites is None else sites @ translations
+        at_sites = translations if sites is None else sparse_times(sites, translations)
         G[:, :, :d] = at_sites.reshape(k, d, d) * np.sqrt(scale / (self.c_m * self.m[:, 0].sum()))
         if self.momentum_form and self._rotation_block is not None:
             dofs = (rows[:, None] * d + np.arange(d)).ravel()
             R = self._rotations.fields[dofs]
-            at_sites = (R if sites is None else sites @ R).reshape(k, d, RIGID_MODES[d] - d)
+            at_sites = (R if sites is None else sparse_times(sites, R)).reshape(
+                k, d, RIGID_MODES[d] - d)
             root = np.linalg.cholesky(np.linalg.inv(self._rotation_block))
             G[:, :, d:] = np.sqrt(scale) * at_sites @ root
         return G
