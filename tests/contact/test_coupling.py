@@ -809,3 +809,26 @@ def test_a_body_s_iterate_is_kept_within_the_step_s_motion_limit():
     np.testing.assert_array_equal(back, -0.5 * h * shift)
     step.u = 2.0 * h * shift
     np.testing.assert_array_equal(motion_bounded_step(step, h * shift, h, 7), h * shift)
+
+
+def test_contacts_at_inactive_nodes_are_found_as_the_loop_over_contacts_found_them():
+    """coupling.inactive_nodes (one lookup in the bodies' active rows laid end to end)
+    marks what the per-contact loop it replaced marked: a contact whose node carries no
+    unknown of its body's step; never one whose body has no step (a wall, body 5)."""
+    from types import SimpleNamespace
+
+    from softgrains.contact.coupling import inactive_nodes
+
+    rng = np.random.default_rng(8)
+    steps = {b: SimpleNamespace(active_row=np.where(rng.random(size) < 0.3, -1,
+                                                    np.arange(size)))
+             for b, size in ((0, 40), (2, 25), (3, 60))}
+    bodies = rng.choice([0, 2, 3, 5], 300)
+    local = np.array([rng.integers(0, steps[b].active_row.size) if b in steps
+                      else rng.integers(0, 1000) for b in bodies])
+    expected = np.array([b in steps and steps[b].active_row[i] < 0
+                         for b, i in zip(bodies, local, strict=True)])
+    got = inactive_nodes(bodies, local, steps)
+    np.testing.assert_array_equal(got, expected)
+    assert got.any() and not got[bodies == 5].any()
+    assert inactive_nodes(bodies[:0], local[:0], steps).size == 0

@@ -151,3 +151,17 @@ def test_a_grain_in_a_box_corner_gets_each_walls_inner_face_normal(walls_first):
     assert grain_top.any() and grain_right.any()
     assert np.allclose(contacts.normal[grain_top], [0.0, -1.0])
     assert np.allclose(contacts.normal[grain_right], [-1.0, 0.0])
+
+
+def test_pairs_within_groups_are_the_nested_loops_pairs_in_order():
+    """detection._pairs_within (the kernel that lists the body pairs at a node): every
+    pair a < b within each group, group after group, in the order of the nested loops it
+    replaced; none from groups of one."""
+    from softgrains.contact.detection import _pairs_within
+
+    starts, counts = np.array([0, 4, 5, 9]), np.array([4, 1, 4, 3])
+    expected = [(a, b) for s, c in zip(starts, counts, strict=True)
+                for a in range(s, s + c) for b in range(a + 1, s + c)]
+    a, b = _pairs_within(starts, counts)
+    assert list(zip(a.tolist(), b.tolist(), strict=True)) == expected
+    assert _pairs_within(starts[:0], counts[:0])[0].size == 0

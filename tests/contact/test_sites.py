@@ -125,3 +125,15 @@ def test_site_map_is_the_sum_of_each_sites_stencil_blocks():
         dense[s * d:(s + 1) * d, c * d:(c + 1) * d] += site_blocks[s, k]
     assert H.has_canonical_format
     np.testing.assert_allclose(H.toarray(), dense, rtol=1e-15, atol=1e-15)
+
+
+def test_distinct_pairs_are_the_sorted_set_of_pairs():
+    """sites._distinct_pairs: the distinct (α, β) of the contacts ascending, as the sorted
+    set of tuples it replaced (none for no contact)."""
+    from softgrains.contact.sites import _distinct_pairs
+
+    rng = np.random.default_rng(2)
+    alpha, beta = rng.integers(0, 6, 200), rng.integers(6, 12, 200)
+    expected = sorted({(int(a), int(b)) for a, b in zip(alpha, beta, strict=True)})
+    assert _distinct_pairs(alpha, beta) == expected
+    assert _distinct_pairs(alpha[:0], beta[:0]) == []

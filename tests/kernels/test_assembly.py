@@ -106,13 +106,14 @@ def test_tangent_gather_matches_the_sum_over_points_in_2d_and_3d(d):
 def test_start_strain_energy_is_the_stress_kernels_energy_at_rest(small_body, chunks):
     """start_strain_energy (a θ = 1 step's start: no f^int(0)) is point_stresses' energy
     at u = 0 to the last bit (its serial twin's: the parallel one may sum the chunks in
-    another order), for both laws and any chunking."""
+    another order), for both laws and any chunking, an inverted point left out."""
     rng = np.random.default_rng(5)
     lat, x, v0, box, nodes, N, dN, s = small_body(1)
     n = len(x)
     lam, mu = lame_parameters(1.0e6, 0.3)
     F_n = np.eye(2) + 0.1 * rng.standard_normal((n, 2, 2))
     vol_n = v0 * np.linalg.det(F_n)
+    F_n[3] = [[1.0, 0.0], [0.0, -0.5]]  # an inverted point: left out by both
     laws = rng.integers(0, 2, n).astype(np.int64)
     lams, mus = np.full(n, lam), np.full(n, mu)
     _, energy = point_stresses.serial(nodes, dN, np.zeros((box.size, 2)), F_n, vol_n, laws, lams,

@@ -281,11 +281,12 @@ def test_the_one_call_line_search_is_implicit_line_search(scale, mass_matrix):
         assert jmin > 0.0 and rnorm > np.linalg.norm(r0)  # no descent: the least ‖R‖
 
 
-def test_the_step_energy_reuses_the_line_searchs_forces_exactly():
+@pytest.mark.parametrize("mass_matrix", ["lumped", "consistent"])
+def test_the_step_energy_reuses_the_line_searchs_forces_exactly(mass_matrix):
     """grid_dissipation takes f^int and W at the converged u from the last line search
     (or the step's set-up) instead of evaluating them again: the same value to the bit as
     with the evaluation, after the set-up and after Newton steps."""
-    step = _loaded_disk_step()
+    step = _loaded_disk_step(mass_matrix=mass_matrix)
     for _ in range(3):
         assert step._forces_at is not None and step._forces_at[0] is step.u
         reused = step.grid_dissipation()

@@ -317,6 +317,23 @@ def _keys(nodes: ContactNodes) -> list[tuple[int, int, int, int]]:
                     site.tolist(), strict=True))
 
 
+def inactive_nodes(bodies: np.ndarray, local: np.ndarray, steps: dict) -> np.ndarray:
+    """Whether each contact's node (``local`` in the box of body ``bodies[c]``) carries no
+    unknown of that body's step (below its activity threshold); False where the body has
+    no step (a wall). One lookup in the bodies' active rows laid end to end."""
+    out = np.zeros(bodies.size, bool)
+    if not steps or bodies.size == 0:
+        return out
+    ids = np.fromiter(steps, np.int64, len(steps))
+    rows = [steps[int(b)].active_row for b in ids]
+    start = np.full(max(int(ids.max()), int(bodies.max())) + 1, -1, np.int64)
+    start[ids] = np.cumsum([0] + [r.size for r in rows[:-1]])
+    first = start[bodies]
+    has_step = first >= 0
+    out[has_step] = np.concatenate(rows)[first[has_step] + local[has_step]] < 0
+    return out
+
+
 def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls: dict,
                   settings: CouplingSettings, friction: Callable, step: int, dt: float,
                   gap_points: dict | None = None, spacing: float = 0.0, reach: float = 0.0,
@@ -338,12 +355,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     # a node below a body's activity threshold carries no unknown there: no contact; two
     # kinematic bodies do not interact
     deformable = np.fromiter(steps, np.int64, len(steps))
-    usable = np.isin(contacts.alpha, deformable) | np.isin(contacts.beta, deformable)
-    for bodies, local in ((contacts.alpha, contacts.local_alpha),
-                          (contacts.beta, contacts.local_beta)):
-        for body, s in steps.items():
-            on = np.flatnonzero(bodies == body)
-            usable[on[s.active_row[local[on]] < 0]] = False
+    usable = ((np.isin(contacts.alpha, deformable) | np.isin(contacts.beta, deformable))
+              & ~inactive_nodes(contacts.alpha, contacts.local_alpha, steps)
+              & ~inactive_nodes(contacts.beta, contacts.local_beta, steps))
     contacts = subset(contacts, usable)
     d = lattice.dim
     gaps = np.zeros(len(contacts))

@@ -276,7 +276,10 @@ def start_strain_energy(F_n, vol_n, law, lam, mu, n_chunks):
         energy = 0.0
         for p in range(c * n // n_chunks, (c + 1) * n // n_chunks):
             Fn = F_n[p]
-            energy += vol_n[p] / determinant(Fn) * strain_energy(law[p], Fn, lam[p], mu[p])
+            J = determinant(Fn)
+            if J <= 0.0:  # (an inverted point: left out, as point_stresses leaves it)
+                continue
+            energy += vol_n[p] / J * strain_energy(law[p], Fn, lam[p], mu[p])
         W_chunk[c] = energy
     return W_chunk.sum()
 

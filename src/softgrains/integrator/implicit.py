@@ -356,7 +356,9 @@ class BodyStep:
             self._Mu = np.empty((n_act, d))
 
         # R(u) = c_m M u − b − s f^int(u) = ∇Π(u),  Π(u) = ½ c_m uᵀMu − b·u + s W(u)
-        if self.newmark or st.theta == 1.0:  # f^int(0) is not in the step's equations
+        if (self.newmark or st.theta == 1.0) and self._serial_kernels():
+            # f^int(0) is not in the step's equations: the start's strain energy alone, as
+            # the serial kernels sum it (the parallel ones sum their chunks in another order)
             f_int_n = None
             self.w_int_n = start_strain_energy(self.F_n, self.vol_n, pts.law, pts.lam,
                                                pts.mu, self.n_chunks)
@@ -390,7 +392,7 @@ class BodyStep:
             f_int, jmin, w_int = self.internal_force(u, False)
         self.u, self.jmin = u, jmin
         # (u, f^int(u), W(u)) of the iterate's last evaluation, for grid_dissipation
-        self._forces_at = (u, f_int, w_int)
+        self._forces_at = (u, f_int, w_int) if jmin > 0.0 else None
         self.r = self.residual(u, f_int)
         self.rnorm = self.r0 = float(np.linalg.norm(self.r))
         # the stopping threshold of the last convergence test (residual_ratio)
@@ -873,7 +875,8 @@ class BodyStep:
         before = (self.u, self.r, self.rnorm, self.jmin, self.pi, self._forces_at)
         if self._in_one_call():
             self.u, self.r, self.rnorm, self.jmin, f_int, w_int = self._momentum_line_search(du)
-            self._forces_at = (self.u, f_int, w_int) if self.jmin > 0.0 else None
+            self._forces_at = ((self.u, f_int, w_int)
+                               if self.jmin > 0.0 and np.isfinite(self.rnorm) else None)
         else:
             self.u, _, self.r, self.rnorm, self.jmin, self.pi = line_search(
                 self.u, du, self.r, self.pi, self.internal_force, self.residual,
@@ -887,8 +890,12 @@ class BodyStep:
         (dense_direction.py, momentum_line_search.py): with the momentum form, on serial
         kernels, so not for a body that the calling thread's parallel kernels share
         (threads.threads_for)."""
-        return self.momentum_form and (self.nodes.shape[0] < PARALLEL_MIN_POINTS
-                                       or numba.get_num_threads() == 1)
+        return self.momentum_form and self._serial_kernels()
+
+    def _serial_kernels(self) -> bool:
+        """Whether the body's kernels run serial on the calling thread (threads.threads_for:
+        fewer than PARALLEL_MIN_POINTS points, or one Numba thread)."""
+        return self.nodes.shape[0] < PARALLEL_MIN_POINTS or numba.get_num_threads() == 1
 
     def _point_tangents(self, tangent: bool) -> PointTangents:
         """The body's points as the one-call kernels take them (momentum form; with or

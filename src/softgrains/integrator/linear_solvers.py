@@ -150,6 +150,7 @@ def sparse_times(H: sp.csr_matrix, X: np.ndarray) -> np.ndarray:
     """H X for a CSR matrix H and a dense X (n, m): SciPy's sums in SciPy's order (row by
     row, entries as stored) by a kernel, without SciPy's dispatch (~20 µs a call, twice
     per body and coupling iteration in BodyStep.rigid_modes)."""
+    H = H.tocsr()  # (itself where it is CSR)
     out = np.zeros((H.shape[0], X.shape[1]))
     _csr_times_dense(H.indptr, H.indices, H.data, np.ascontiguousarray(X, float), out)
     return out
