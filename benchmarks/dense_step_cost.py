@@ -81,8 +81,8 @@ def main() -> None:
         r = time_steps(args.run, overrides, args.steps)
         mean = statistics.fmean(r["seconds"])
         first = first or mean
-        print(f"| {label} | {mean:.2f} | {statistics.median(r['seconds']):.2f} | "
-              f"{max(r['seconds']):.2f} | {r['cpu_over_wall']:.2f} | "
+        print(f"| {label} | {mean:.3f} | {statistics.median(r['seconds']):.3f} | "
+              f"{max(r['seconds']):.3f} | {r['cpu_over_wall']:.2f} | "
               f"{statistics.fmean(r['iterations']):.1f} | "
               f"{statistics.fmean(r['sweeps']):.0f} | {mean / first:.2f} |", flush=True)
 
