@@ -207,7 +207,8 @@ def _site_rows_of(H: sp.csr_matrix, sites: np.ndarray, d: int) -> sp.csr_matrix:
     ``H[(sites[:, None] * d + np.arange(d)).ravel()]`` gives them, by a kernel (SciPy's
     fancy row indexing took ~0.1 ms a body and working set, ~2% of a dense step)."""
     if sites.size and not (sites.min() >= 0 and (sites.max() + 1) * d <= H.shape[0]):
-        raise IndexError(f"site rows {sites.min()}…{sites.max()} outside H's {H.shape[0] // d}")
+        raise IndexError(f"sites {sites.min()}…{sites.max()} asked of a map of "
+                         f"{H.shape[0] // d} sites")
     indptr, indices, data = _csr_site_rows(H.indptr, H.indices, H.data, sites, d)
     return sp.csr_matrix((data, indices, indptr), shape=(sites.size * d, H.shape[1]))
 
