@@ -8,16 +8,23 @@ drift).
     git worktree add /tmp/bacc bacc7c3
     python benchmarks/cost_bar.py /tmp/bacc --out /tmp/bar [--rounds 3] [--stop 200]
 
-A warm-up run of this checkout comes first (Numba's compilation; the reference's first
-run compiles in its pre-compaction, outside the dense bands). Each run writes its folder
-under --out (ours_k, reference_k); an existing folder is reused, not run again, so a
-stopped benchmark goes on where it stopped.
+Each side runs its own copy of the example (``--case`` is relative to each checkout: the
+reference's case as it was then, e.g. bacc7c3's with its overlap removal; an absolute
+path gives both the same file). A warm-up run of each checkout comes first (Numba's
+compilation). Each run writes its folder under --out (ours_k, reference_k); a folder
+whose run completed (summary.json) is reused, not run again, so a stopped benchmark goes
+on where it stopped (an unfinished folder is run again) — reused runs are no longer
+neighbours in time of the others. The table gives per band the range of the runs' mean
+s a step, the ratio of the means over the runs, the neighbouring runs' ratios, and the
+ratio of the runs' medians averaged.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -29,11 +36,21 @@ from compaction_cost_by_stress import band_costs
 HERE = Path(__file__).resolve().parent.parent  # this checkout
 
 
+def _completed(run: Path) -> bool:
+    """Whether the run folder holds a run that ended as completed (its summary.json)."""
+    try:
+        summary = json.loads((run / "summary.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return str(summary.get("status", "")).startswith("completed")
+
+
 def run_case(checkout: Path, case: str, out: Path, stop: float) -> float:
     """The example ``case`` of ``checkout`` (its own code: ``checkout/src`` first on the
     path) to σ_yy/σ0 = ``stop``, on one Numba thread; returns the wall time."""
-    if (out / "series.csv").exists():
+    if _completed(out):
         return float("nan")
+    shutil.rmtree(out, ignore_errors=True)  # (an unfinished run: again)
     env = dict(os.environ, NUMBA_NUM_THREADS="1", PYTHONPATH=str(checkout / "src"))
     start = time.perf_counter()
     done = subprocess.run([sys.executable, "-m", "softgrains", "run", case, "--out",
@@ -55,11 +72,14 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3, help="runs of each checkout")
     parser.add_argument("--bands", type=float, nargs="+", default=[40.0, 100.0, 200.0])
     args = parser.parse_args()
+    if args.rounds < 1:
+        raise SystemExit("--rounds: at least 1")
     reference = args.reference.resolve()
     if not (reference / "src" / "softgrains").is_dir():
         raise SystemExit(f"{reference}: no src/softgrains (a checkout of softgrains?)")
     args.out.mkdir(parents=True, exist_ok=True)
     run_case(HERE, args.case, args.out / "warm_up", args.stop)
+    run_case(reference, args.case, args.out / "reference_warm_up", args.stop)
     order = []  # (label, folder) in the order run: ours, reference, ours, ...
     for k in range(1, args.rounds + 1):
         order.append(("ours", args.out / f"ours_{k}"))
@@ -70,8 +90,8 @@ def main() -> None:
                            args.stop)
         print(f"{folder.name}: " + ("reused" if seconds != seconds else f"{seconds:.0f} s"),
               flush=True)
-    print("\n| σ/σ0 | ours s/step (means) | reference s/step (means) | ratio of the means "
-          "| neighbouring pairs | ratio of the medians |")
+    print("\n| σ/σ0 | ours s/step (the runs' means) | reference s/step (the runs' means) "
+          "| ratio of the means | neighbouring pairs | ratio of the medians |")
     print("| --- | --- | --- | --- | --- | --- |")
     for lower, upper in zip(args.bands[:-1], args.bands[1:], strict=False):
         costs = [(label, band_costs(folder, [lower, upper])[0]) for label, folder in order]
