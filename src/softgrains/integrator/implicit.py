@@ -714,7 +714,9 @@ class BodyStep:
 
     def point_displacements(self, u: np.ndarray) -> np.ndarray:
         """The points' displacements u_p = Σ_I N_I(x_p) u_I for nodal values u (the active
-        rows), as the step moves them (x_p^{n+1} = x_p^n + u_p)."""
+        rows), as the step moves them (x_p^{n+1} = x_p^n + u_p). (The coupling loop's
+        motion bound fuses this with the bound in one kernel, coupling._points_motion; the
+        tests hold the two equal.)"""
         self.u_box[:] = 0.0
         self.u_box[self.active] = u
         out = np.empty((self.nodes.shape[0], self.d))
