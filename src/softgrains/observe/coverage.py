@@ -52,14 +52,18 @@ def _cell_reach(shape):
 
 
 @njit(cache=True)
-def _raster(x, A, shape, grain, lower, px, py, nx, ny, covered, last):
-    """Mark every pixel inside each point's cell (local coordinates A⁻¹(y − x), A = F E);
+def _raster(x, F, frame, shape, grain, lower, px, py, nx, ny, covered, last):
+    """Mark every pixel inside each point's cell (local coordinates A⁻¹(y − x), A = F E, E
+    the cell's ``frame``);
     ``covered`` counts distinct grains per pixel (points must come grouped by grain;
     ``last`` holds the last grain that marked a pixel). Returns the number of pixels covered
     and Σ_pixels max(0, covered − 1), counted as the marks are made."""
     n_covered, n_overlap = 0, 0
     for p in range(x.shape[0]):
-        a, b, c, d = A[p, 0, 0], A[p, 0, 1], A[p, 1, 0], A[p, 1, 1]
+        a = F[p, 0, 0] * frame[p, 0, 0] + F[p, 0, 1] * frame[p, 1, 0]
+        b = F[p, 0, 0] * frame[p, 0, 1] + F[p, 0, 1] * frame[p, 1, 1]
+        c = F[p, 1, 0] * frame[p, 0, 0] + F[p, 1, 1] * frame[p, 1, 0]
+        d = F[p, 1, 0] * frame[p, 0, 1] + F[p, 1, 1] * frame[p, 1, 1]
         det = a * d - b * c
         if det <= 0.0:
             continue
@@ -108,8 +112,9 @@ def coverage(x: np.ndarray, F: np.ndarray, cells: PointCells, grain: np.ndarray,
     nx, ny = (max(int(np.ceil(s / target)), 1) for s in size)
     covered = np.zeros(nx * ny, np.int32)
     last = np.full(nx * ny, -1, np.int32)
-    deformed = np.einsum("pij,pjk->pik", np.asarray(F, float), cells.frame)
-    n_covered, n_overlap = _raster(x, deformed, shape, grain.astype(np.int32),
+    n_covered, n_overlap = _raster(x, np.ascontiguousarray(F, float),
+                                   np.ascontiguousarray(cells.frame, float), shape,
+                                   grain.astype(np.int32),
                                    np.asarray(lower, float), size[0] / nx, size[1] / ny, nx,
                                    ny, covered, last)
     return float(n_covered) / covered.size, float(n_overlap) / covered.size

@@ -67,8 +67,9 @@ def grain_outline(x: np.ndarray, F: np.ndarray, side: np.ndarray,
     covered = np.zeros(nx * k * ny * k, np.int32)
     last = np.full(covered.size, -1, np.int64)
     squares = lattice_cells(side**2).shape  # (the cells as squares of side s_p)
-    _raster(np.ascontiguousarray(x, float), np.ascontiguousarray(F, float), squares,
-            np.zeros(len(x), np.int64), lower, fine, fine, nx * k, ny * k, covered, last)
+    _raster(np.ascontiguousarray(x, float), np.ascontiguousarray(F, float),
+            np.tile(np.eye(2), (len(x), 1, 1)), squares, np.zeros(len(x), np.int64), lower,
+            fine, fine, nx * k, ny * k, covered, last)
     coverage = covered.reshape(nx, k, ny, k).mean(axis=(1, 3))
     image = gaussian_filter(coverage, BLUR_SPACINGS * pixels_per_spacing)
     centres = lower[:, None] + pixel * (np.arange(max(nx, ny)) + 0.5)[None, :]
