@@ -22,7 +22,6 @@ ratio of the runs' medians averaged.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import statistics
@@ -33,22 +32,15 @@ from pathlib import Path
 
 from compaction_cost_by_stress import band_costs
 
+from softgrains.sweep.runner import completed
+
 HERE = Path(__file__).resolve().parent.parent  # this checkout
-
-
-def _completed(run: Path) -> bool:
-    """Whether the run folder holds a run that ended as completed (its summary.json)."""
-    try:
-        summary = json.loads((run / "summary.json").read_text())
-    except (OSError, ValueError):
-        return False
-    return str(summary.get("status", "")).startswith("completed")
 
 
 def run_case(checkout: Path, case: str, out: Path, stop: float) -> float:
     """The example ``case`` of ``checkout`` (its own code: ``checkout/src`` first on the
     path) to σ_yy/σ0 = ``stop``, on one Numba thread; returns the wall time."""
-    if _completed(out):
+    if completed(out):
         return float("nan")
     shutil.rmtree(out, ignore_errors=True)  # (an unfinished run: again)
     env = dict(os.environ, NUMBA_NUM_THREADS="1", PYTHONPATH=str(checkout / "src"))
