@@ -737,26 +737,37 @@ def test_the_largest_step_within_the_motion_limit():
     assert largest_step_within(np.array([[2.0, 0.0]]), np.array([[1.0, 0.0]]), L) == 0.0
 
 
-def test_the_points_displacements_are_the_nodal_ones_interpolated():
-    """BodyStep.point_displacements: a uniform nodal displacement moves every point by it
-    (Σ_I N_I = 1 at every point); a linear field moves each by its value there."""
+def _interpolated(step, u):
+    """The points' displacements Σ_k N_k(x_p) u_{I_k} over each point's stencil, in
+    stencil order (the reference of coupling._points_motion)."""
+    u_box = np.zeros((step.box.size, u.shape[1]))
+    u_box[step.active] = u
+    out = np.zeros((step.nodes.shape[0], u.shape[1]))
+    for k in range(step.nodes.shape[1]):
+        out += step.N[:, k, None] * u_box[step.nodes[:, k]]
+    return out
+
+
+def test_a_uniform_nodal_displacement_moves_every_point_by_it():
+    """coupling._points_motion interpolates the nodal displacements to the points: a
+    uniform one moves every point by it (Σ_I N_I = 1 at every point)."""
+    from softgrains.contact.coupling import _points_motion
+
     step = _disk_step()
     c = np.array([0.03, -0.02])
-    np.testing.assert_allclose(step.point_displacements(np.tile(c, (step.u.shape[0], 1))),
-                               np.tile(c, (step.pts.x.shape[0], 1)), atol=1e-14)
-    # any nodal field: Σ_k N_k(x_p) u_{I_k} over each point's own stencil
-    u = np.random.default_rng(4).standard_normal(step.u.shape)
-    u_box = np.zeros((step.box.size, 2))
-    u_box[step.active] = u
-    np.testing.assert_allclose(step.point_displacements(u),
-                               np.einsum("pk,pkd->pd", step.N, u_box[step.nodes]),
-                               rtol=0.0, atol=1e-14)
+    u = np.tile(c, (step.u.shape[0], 1))
+    most_a, alpha, most_reach = _points_motion(step.nodes, step.N, step.active_row, u,
+                                               np.zeros_like(u), 1.0)
+    assert abs(np.sqrt(most_a) - np.linalg.norm(c)) <= 1e-14
+    assert most_reach == most_a and alpha == 1.0
+    np.testing.assert_allclose(_interpolated(step, u), np.tile(c, (step.pts.x.shape[0], 1)),
+                               atol=1e-14)
 
 
 def test_the_points_motion_kernel_is_the_interpolated_displacements_bound():
-    """coupling._points_motion (one pass over the points) gives what point_displacements
-    and largest_step_within give on random nodal fields: max |a_p|², the largest α and
-    max |a_p + b_p|², to the bit."""
+    """coupling._points_motion (one pass over the points) gives what the interpolated
+    displacements and largest_step_within give on random nodal fields: max |a_p|², the
+    largest α and max |a_p + b_p|², to the bit."""
     from softgrains.contact.coupling import _points_motion, largest_step_within
 
     step = _disk_step()
@@ -765,7 +776,7 @@ def test_the_points_motion_kernel_is_the_interpolated_displacements_bound():
     for scale in (0.01, 0.05, 0.2):
         u = scale * rng.standard_normal(step.u.shape)
         du = scale * rng.standard_normal(step.u.shape)
-        a, b = step.point_displacements(u), step.point_displacements(du)
+        a, b = _interpolated(step, u), _interpolated(step, du)
         limit = 0.1
         most_a, alpha, most_reach = _points_motion(step.nodes, step.N, step.active_row, u,
                                                    du, limit)

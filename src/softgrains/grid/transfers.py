@@ -88,18 +88,6 @@ def particles_to_grid(nodes, N, mass, v, a, n_box, m_I, mv_I, ma_I):
                 ma_I[I, j] += wm * a[p, j]
 
 
-@njit(cache=True, nogil=True)
-def interpolate(nodes, N, u_I, out):
-    """out_p = Σ_k N_k(x_p) u_{I_k} for every point p (nodal values u_I, (box nodes, d))."""
-    d = u_I.shape[1]
-    for p in range(nodes.shape[0]):
-        for i in range(d):
-            acc = 0.0
-            for k in range(nodes.shape[1]):
-                acc += N[p, k] * u_I[nodes[p, k], i]
-            out[p, i] = acc
-
-
 @njit(cache=True, inline="always")
 def deformation_increment(nodes, dN, p, u_I, dF):
     """ΔF_p = I + Σ_k u_{I_k} ⊗ ∇N_k(X_p) for point p (written into dF)."""

@@ -37,7 +37,6 @@ from softgrains.grid.transfers import (
     UPDATE_PARTICLE_NEWMARK,
     UPDATE_PARTICLE_THETA,
     grid_to_particles,
-    interpolate,
     particles_to_grid,
     restrict_to_active,
 )
@@ -711,17 +710,6 @@ class BodyStep:
         """Position of active ``row``'s node and the body's point nearest to it."""
         node = self.stepper.lattice.node_positions(self.box, self.active[row:row + 1])[0]
         return node, int(np.argmin(np.sum((self.pts.x - node) ** 2, axis=1)))
-
-    def point_displacements(self, u: np.ndarray) -> np.ndarray:
-        """The points' displacements u_p = Σ_I N_I(x_p) u_I for nodal values u (the active
-        rows), as the step moves them (x_p^{n+1} = x_p^n + u_p). (The coupling loop's
-        motion bound fuses this with the bound in one kernel, coupling._points_motion; the
-        tests hold the two equal.)"""
-        self.u_box[:] = 0.0
-        self.u_box[self.active] = u
-        out = np.empty((self.nodes.shape[0], self.d))
-        interpolate(self.nodes, self.N, self.u_box, out)
-        return out
 
     def worst_point(self, u: np.ndarray) -> tuple[int, float]:
         """(index in the body, J) of the point with the smallest or a non-finite J at the
