@@ -843,3 +843,53 @@ def test_contacts_at_inactive_nodes_are_found_as_the_loop_over_contacts_found_th
     np.testing.assert_array_equal(got, expected)
     assert got.any() and not got[bodies == 5].any()
     assert inactive_nodes(bodies[:0], local[:0], steps).size == 0
+
+
+def test_stiffened_rotations_stay_only_while_the_loop_makes_progress_with_them():
+    """_StiffeningTrial (coupling.py): the measures of the quasi-static squeeze's slow steps
+    after the switch (883 → 33.5 → 3.3, session 55's trace) keep the stiffened rotations;
+    the 100-grain deposit's (3.21e3 at the switch, then +1.8% an iteration) undo them
+    STIFFENING_TRIAL iterations after the switch; and help that stops (a fall to 1.17,
+    then +1.7% an iteration) undoes them STIFFENING_TRIAL iterations after the last 10%
+    improvement."""
+    from softgrains.contact.coupling import STIFFENING_TRIAL, _StiffeningTrial
+
+    squeeze = _StiffeningTrial(9, 883.0, [0])
+    assert not squeeze.failed(10, 33.5) and not squeeze.failed(11, 3.31)
+    deposit = _StiffeningTrial(10, 3.21e3, [0])
+    rising = [3.21e3 * 1.018 ** j for j in range(1, 10)]
+    undone = next(j for j, m in enumerate(rising, start=1) if deposit.failed(10 + j, m))
+    assert undone == STIFFENING_TRIAL
+    helped = _StiffeningTrial(10, 1.58e3, [0])
+    measures = [26.1, 2.93, 1.17] + [1.17 * 1.017 ** j for j in range(1, 10)]
+    undone = next(j for j, m in enumerate(measures, start=1) if helped.failed(10 + j, m))
+    assert undone == 3 + STIFFENING_TRIAL
+
+
+def test_a_deposit_step_is_not_held_back_by_stiffened_rotations_that_do_not_help(
+        monkeypatch):
+    """#14 item 6 (the pre-compaction ends in bounded steps): the first steps of the
+    100-grain deposit (examples/compaction_1000.toml at 100 grains, 4e-4 s a step).
+    Until session 55 a loop still slow at its 10th iteration stiffened every grain's
+    rotation (BodyStep.stiffen_rotation) and kept them so: at steps 8 and 18 the loop,
+    about to converge, crawled on at line-search steps of 2^-8, its measure rising, until
+    the stall test gave up 40 iterations later and the step was retried at Δt/2 (seven
+    retries to t = 0.03 s, 72 s; 48 s and none since, this 2-core machine beside another
+    run). Now the stiffened rotations are undone where they do not help
+    (coupling.STIFFENING_TRIAL): no step of the first 20 is retried, and at least one
+    undid them."""
+    from pathlib import Path
+
+    from softgrains.contact import coupling
+
+    case = Path(__file__).resolve().parents[2] / "examples" / "compaction_1000.toml"
+
+    def run():
+        sim = Simulation(load_case(case, ["sample.count=100", "sample.box_width=0.09"]))
+        undone = sum(sim.step().contact.stiffenings_undone for _ in range(20))
+        return sim.retried_steps, undone
+
+    retried, undone = run()
+    assert retried == 0 and undone > 0
+    monkeypatch.setattr(coupling, "STIFFENING_TRIAL", 10**9)  # never undone
+    assert run()[0] > 0  # what undoing them changes

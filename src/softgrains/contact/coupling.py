@@ -119,6 +119,16 @@ STUCK_RESOLUTION = 1e-9
 # frictional step near 126 σ0 whose solves stopped at 1.6-2.0e-4 against 1e-4, 0.3 s
 # each, 12 times before its residuals repeated: 5.9 s, 11× the compaction's median step)
 FAILED_SOLVES_IN_A_ROW = 3
+# the momentum form's stiffened rotations (the auto tangent's remedy of a slow loop) stay
+# while the loop makes progress with them: its measure below STALL_DECREASE × its best
+# since the switch (at first: its value then) at least once every this many iterations;
+# else they are undone for the rest of the step (session 55: in the 100-grain
+# pre-compaction, at 4e-4 s a step, loops about to converge at their 10th iteration were
+# slowed by them to line-search steps of 2^-8, the measure rising 0.4% an iteration, until
+# the stall test gave up 40 iterations later and the step was retried at Δt/2; on the
+# quasi-static squeezes they were made for, the measure falls 10-30× at the first
+# iteration after the switch, and the loop converges at the next)
+STIFFENING_TRIAL = 3
 # a failed solve whose fallbacks ended above this fraction of the stalled Newton's residual
 # (they gained less than 10%) makes the loop's next solves skip them until the iteration
 # changes (Progress.restart): session 37, seed 3's frictional step 270 (2222 contacts, W
@@ -212,6 +222,8 @@ class ContactDiagnostics:
     # times the working set grew: contacts left out that closed, corrected end gaps, a
     # solve redone on every contact
     working_set_growths: int = 0
+    # times the momentum form's stiffened rotations were undone (STIFFENING_TRIAL)
+    stiffenings_undone: int = 0
     # the least start-of-step gap of the grains' outer points that one pass leaves out
     # (surfaces.least_unsampled_gap; NaN: no pair took one pass)
     least_unsampled_gap: float = math.nan
@@ -468,6 +480,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     slots = None
     left_out = None  # a contact left out that closed, when that ended the last iteration
     progress, finished = Progress(), False
+    measure = math.inf  # the loop's last stall measure (Progress)
+    trial = None  # the stiffened rotations on trial (_StiffeningTrial)
+    stiffening_failed = False  # they were undone: no more stiffening in this step
     short_gap = None  # (contact, true end gap, floor) when the end-gap check did not settle
     for k in range(1, settings.max_iterations + 1):
         # the Newton direction of every body not converged, with the current impulses
@@ -558,11 +573,16 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # is the deformation-scale retry's, solvers.solve)
             slow = k - tangent_from >= AUTO_TANGENT_ITERATIONS
             switched = [i for i, b in steps.items()
-                        if (slow or not b.momentum_form) and b.use_projected_tangent()]
+                        if (not b.momentum_form or (slow and not stiffening_failed))
+                        and b.use_projected_tangent()]
             if switched:
-                # (a body of the momentum form stiffens its rotations instead: the switch
-                # gets as many iterations and failed solves before the next one)
+                # (a body of the momentum form stiffens its rotations instead, on trial
+                # (STIFFENING_TRIAL): the switch gets as many iterations and failed solves
+                # before the next one)
                 failed_solves, tangent_from = 0, k
+                stiffened = [i for i in switched if steps[i].momentum_form]
+                if stiffened:
+                    trial = _StiffeningTrial(k, measure, stiffened)
                 for i in switched:
                     done[i] = False
                 slots.W = [None] * len(slots.W)
@@ -661,7 +681,18 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
         else:
             ratios = [diag.residual / settings.tolerance] + [
                 b.residual_ratio(p_scale * b.impulse_weight) for b in steps.values()]
-            if progress.stalled(max(ratios), np.array(ratios),
+            measure = max(ratios)
+            if trial is not None and trial.failed(k, measure):
+                # it did not help: the rotations as they were, for the rest of the step
+                for i in trial.bodies:
+                    if steps[i].relax_rotation():
+                        done[i] = False
+                trial, stiffening_failed, tangent_from = None, True, k
+                slots.W = [None] * len(slots.W)
+                diag.stiffenings_undone += 1
+                progress.restart()
+                continue
+            if progress.stalled(measure, np.array(ratios),
                                 result.residual if failed else None):
                 diag.stalled = True
                 break
@@ -788,6 +819,25 @@ def _points_motion(nodes, N, active_row, u, du, limit):
         most_a, most_reach = max(most_a, aa), max(most_reach, reach)
         least = min(least, _leaving_root(aa, ab, bb, limit))
     return most_a, min(max(least, 0.0), 1.0), most_reach
+
+
+@dataclass
+class _StiffeningTrial:
+    """The stiffened rotations of ``bodies`` on trial (STIFFENING_TRIAL): ``best``, the
+    loop's least stall measure since the switch (at first: its value at the switch), last
+    improved at coupling iteration ``at`` (at first: the switch's)."""
+
+    at: int
+    best: float
+    bodies: list[int]
+
+    def failed(self, k: int, measure: float) -> bool:
+        """Record iteration k's measure; True once STIFFENING_TRIAL iterations have passed
+        without one below STALL_DECREASE × the best before it."""
+        if measure < STALL_DECREASE * self.best:
+            self.best, self.at = measure, k
+            return False
+        return k - self.at >= STIFFENING_TRIAL
 
 
 def motion_bounded_step(step, du: np.ndarray, limit: float, at: int) -> np.ndarray:

@@ -445,10 +445,22 @@ class BodyStep:
         tangent made things worse (session 48: 40 iterations without convergence on the
         frictional squeeze). The frictionless D/h 10 squeeze takes 5.2 / 12 coupling
         iterations with it, 7.7 / 47 without. Once stiffened the direction is the
-        stiffened matrix's own (:meth:`_momentum_direction`). True if it switched."""
+        stiffened matrix's own (:meth:`_momentum_direction`); the loop undoes it
+        (:meth:`relax_rotation`) where it does not help (coupling.STIFFENING_TRIAL). True
+        if it switched."""
         if not self.momentum_form or not self.can_project():
             return False
         self._stiff_rotation = True
+        self._A = self._lu = None
+        return True
+
+    def relax_rotation(self) -> bool:
+        """Undo :meth:`stiffen_rotation`: the Newton matrix's rotations take their inertia
+        alone again (the coupling loop, where the stiffening did not help:
+        coupling.STIFFENING_TRIAL). True if they were stiffened."""
+        if not self._stiff_rotation:
+            return False
+        self._stiff_rotation = False
         self._A = self._lu = None
         return True
 
