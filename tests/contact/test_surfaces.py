@@ -321,12 +321,31 @@ def test_outer_candidates_are_the_outer_points_in_the_other_bodys_widened_box():
         np.testing.assert_array_equal(got, expected)
 
 
+def _gaps_by_numpy(c, grad, F, radius, spacing, round_body=True):
+    """The calibrated distance, the normal, the cell support and the gap of surfaces.py's
+    formulas, written with NumPy on whole arrays (the kernels' reference)."""
+    xi, profile, slope = surfaces.PROFILES[grad.shape[1]]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inside = np.interp(np.clip(c, profile[1], profile[-2]), profile, xi)
+        length = np.linalg.norm(grad, axis=1)
+        lam = radius * length / np.interp(inside, xi, slope)
+        distance = np.where(c > 0.0, -radius * inside, np.inf)
+        n = -grad / length[:, None]
+        FTn = np.einsum("pji,pj->pi", F, np.nan_to_num(n))
+        s = (FTn / np.maximum(np.linalg.norm(FTn, axis=1), 1e-300)[:, None] if round_body
+             else np.sign(FTn))
+        r = -0.5 * spacing * np.einsum("pij,pj->pi", F, s)
+        gap = (distance + np.einsum("pi,pi->p", n, r)) / lam
+    return distance, lam, length, n, r, gap
+
+
 @pytest.mark.parametrize("d", [2, 3])
-def test_surface_gaps_are_the_array_functions_composed(d):
-    """surfaces.surface_gaps (one kernel) gives what calibrated_distance, the normal
-    −∇c/‖∇c‖ and edge_gap give on arrays, across the profile, beyond the kernel's reach
-    (c = 0: +inf) and where ∇c vanishes (NaN): to the bit in 2D; in 3D to round-off
-    (np.einsum sums three products in another order)."""
+def test_surface_gaps_are_the_formulas_on_arrays(d):
+    """surfaces.surface_gaps, calibrated_distance and cell_support (kernels over the points,
+    sharing their per-point functions) give what the formulas give on arrays with NumPy,
+    across the profile, beyond the kernel's reach (c = 0: +inf) and where ∇c vanishes
+    (NaN): to the bit in 2D; in 3D to round-off (np.einsum sums three products in another
+    order). The lattice cell's support (sign(Fᵀn)) too."""
     rng = np.random.default_rng(20 + d)
     n, radius, spacing = 400, 0.015, 0.005
     c = rng.uniform(-0.1, 1.1, n).clip(0.0, 1.0)
@@ -336,16 +355,15 @@ def test_surface_gaps_are_the_array_functions_composed(d):
     F = np.eye(d) + 0.2 * rng.standard_normal((n, d, d))
     length, n_out, gap, support = surfaces.surface_gaps(c, grad, F, radius, spacing)
     distance, lam = surfaces.calibrated_distance(c, grad, radius)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        expected_n = -grad / np.linalg.norm(grad, axis=1)[:, None]
-        expected_gap, expected_support = surfaces.edge_gap(distance, expected_n, F, spacing,
-                                                           True)
-        expected_gap /= lam
+    square = surfaces.cell_support(F, -grad, spacing, False)
+    expected = _gaps_by_numpy(c, grad, F, radius, spacing)
+    expected_square = _gaps_by_numpy(c, grad, F, radius, spacing, round_body=False)[4]
     tolerance = 0.0 if d == 2 else 1e-14
-    for got, expected in ((length, np.linalg.norm(grad, axis=1)), (n_out, expected_n),
-                          (gap, expected_gap), (support, expected_support)):
-        finite = np.isfinite(expected)
-        scale = np.abs(expected[finite]).max()
-        np.testing.assert_allclose(got, expected, rtol=tolerance, atol=tolerance * scale)
+    for got, wanted in ((distance, expected[0]), (lam, expected[1]), (length, expected[2]),
+                        (n_out, expected[3]), (support, expected[4]), (gap, expected[5]),
+                        (square[8:], expected_square[8:])):
+        finite = np.isfinite(wanted)
+        scale = np.abs(wanted[finite]).max()
+        np.testing.assert_allclose(got, wanted, rtol=tolerance, atol=tolerance * scale)
     assert np.isinf(gap[:5]).all() and np.isnan(gap[5:8]).all()
     assert np.isfinite(gap[8:]).sum() > n // 2

@@ -211,12 +211,38 @@ def calibrated_distance(value: np.ndarray, grad: np.ndarray, radius: float
     exact for a flat boundary: d = −R F⁻¹(c), F the profile of :func:`_wendland_profile`;
     and λ = ‖∇d‖ = R‖∇c‖/F'(F⁻¹(c)) (1 across a flat boundary), so that ḋ = λ (n·ẋ − ∂c/∂t
     /‖∇c‖). Where c is 0 (beyond the kernel's reach) d is +inf."""
-    xi, F, f = PROFILES[grad.shape[1]]
-    c = np.clip(value, F[1], F[-2])
-    inside = np.interp(c, F, xi)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = radius * np.linalg.norm(grad, axis=1) / np.interp(inside, xi, f)
-    return np.where(value > 0.0, -radius * inside, np.inf), lam
+    xi, profile, slope = PROFILES[grad.shape[1]]
+    distance, lam = np.empty(len(grad)), np.empty(len(grad))
+    _calibrated_distances(np.ascontiguousarray(value, float),
+                          np.ascontiguousarray(grad, float), float(radius), xi, profile,
+                          slope, distance, lam)
+    return distance, lam
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _norm(a, p):
+    """‖a[p]‖ (the squares summed in order)."""
+    total = 0.0
+    for i in range(a.shape[1]):
+        total += a[p, i] * a[p, i]
+    return np.sqrt(total)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _calibrated_point(c, length, radius, xi, profile, slope):
+    """:func:`calibrated_distance` at one point of field c and ‖∇c‖ = ``length``: (d, λ).
+    (NumPy's error model: 0/0 is NaN where ∇c vanishes.)"""
+    inside = np.interp(min(max(c, profile[1]), profile[-2]), profile, xi)
+    lam = radius * length / np.interp(inside, xi, slope)
+    return (-radius * inside if c > 0.0 else np.inf), lam
+
+
+@njit(cache=True, error_model="numpy")
+def _calibrated_distances(value, grad, radius, xi, profile, slope, distance, lam):
+    """:func:`calibrated_distance`, point by point."""
+    for p in range(grad.shape[0]):
+        distance[p], lam[p] = _calibrated_point(value[p], _norm(grad, p), radius, xi,
+                                                profile, slope)
 
 
 class KernelSurface:
@@ -369,12 +395,38 @@ def cell_support(F: np.ndarray, n: np.ndarray, spacing: float, round_body: bool
     the cell meets a surface with outward normal n in front of it): lattice squares, edges
     F δ e_j: r = −½δ F sign(Fᵀn); ring cells (one edge along the radius, taken along n):
     r = −½δ F Fᵀn/‖Fᵀn‖. The cell's half-extent along n is e = −n·r."""
-    FTn = np.einsum("pji,pj->pi", F, np.nan_to_num(n))
-    if round_body:
-        s = FTn / np.maximum(np.linalg.norm(FTn, axis=1), 1e-300)[:, None]
-    else:
-        s = np.sign(FTn)
-    return -0.5 * spacing * np.einsum("pij,pj->pi", F, s)
+    r = np.empty(n.shape)
+    _cell_supports(np.ascontiguousarray(F, float), np.ascontiguousarray(n, float),
+                   float(spacing), bool(round_body), r)
+    return r
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _cell_support_point(F, n, p, spacing, round_body, r):
+    """:func:`cell_support` of point p: r[p] (n[p] NaN counts as 0)."""
+    d = n.shape[1]
+    FTn = np.empty(d)
+    size = 0.0
+    for i in range(d):
+        acc = 0.0
+        for j in range(d):
+            nj = n[p, j]
+            acc += F[p, j, i] * (0.0 if np.isnan(nj) else nj)
+        FTn[i] = acc
+        size += acc * acc
+    size = max(np.sqrt(size), 1e-300)
+    for i in range(d):
+        acc = 0.0
+        for j in range(d):
+            acc += F[p, i, j] * (FTn[j] / size if round_body else np.sign(FTn[j]))
+        r[p, i] = -0.5 * spacing * acc
+
+
+@njit(cache=True, error_model="numpy")
+def _cell_supports(F, n, spacing, round_body, r):
+    """:func:`cell_support`, point by point."""
+    for p in range(n.shape[0]):
+        _cell_support_point(F, n, p, spacing, round_body, r)
 
 
 def edge_gap(distance: np.ndarray, n: np.ndarray, F: np.ndarray, spacing: float,
@@ -474,37 +526,17 @@ def surface_gaps(c: np.ndarray, grad: np.ndarray, F: np.ndarray, radius: float,
 @njit(cache=True, error_model="numpy")
 def _gaps_from_field(c, grad, F, radius, xi, profile, slope, spacing, length, n_out, gap,
                      support):
-    """:func:`surface_gaps`, point by point, with the same operations in the same order as
-    calibrated_distance, cell_support and edge_gap on arrays (NumPy's error model: 0/0 is
-    NaN, as there)."""
+    """:func:`surface_gaps`, point by point: calibrated_distance's and cell_support's
+    per-point functions, then edge_gap's sum (NumPy's error model: 0/0 is NaN)."""
     n, d = grad.shape
-    low, high = profile[1], profile[-2]
-    FTn = np.empty(d)
     for p in range(n):
-        total = 0.0
-        for i in range(d):
-            total += grad[p, i] * grad[p, i]
-        length[p] = np.sqrt(total)
-        inside = np.interp(min(max(c[p], low), high), profile, xi)
-        lam = radius * length[p] / np.interp(inside, xi, slope)
-        distance = -radius * inside if c[p] > 0.0 else np.inf
+        length[p] = _norm(grad, p)
+        distance, lam = _calibrated_point(c[p], length[p], radius, xi, profile, slope)
         for i in range(d):
             n_out[p, i] = -grad[p, i] / length[p]
-        size = 0.0
-        for i in range(d):
-            acc = 0.0
-            for j in range(d):
-                nj = n_out[p, j]
-                acc += F[p, j, i] * (0.0 if np.isnan(nj) else nj)
-            FTn[i] = acc
-            size += acc * acc
-        size = max(np.sqrt(size), 1e-300)
+        _cell_support_point(F, n_out, p, spacing, True, support)
         along = 0.0
         for i in range(d):
-            acc = 0.0
-            for j in range(d):
-                acc += F[p, i, j] * (FTn[j] / size)
-            support[p, i] = -0.5 * spacing * acc
             along += n_out[p, i] * support[p, i]
         gap[p] = (distance + along) / lam
 
