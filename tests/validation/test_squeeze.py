@@ -376,3 +376,25 @@ def test_the_stiffened_rotation_converges_on_the_coarse_frictional_squeeze(trave
     assert any(stiffened)  # the path this is about runs
     assert sim.retried_steps == 0
     assert max(iterations) <= 15, iterations
+
+
+def test_a_loop_still_slow_after_its_stiffened_rotations_were_undone_is_retried_shorter(
+        monkeypatch):
+    """coupling.STIFFENING_TRIAL: where the stiffened rotations were undone and the loop is
+    still slow AUTO_TANGENT_ITERATIONS iterations later, it stalls and the step is retried
+    shorter, instead of converging at a slow linear rate that the stall test lets run (a
+    1000-grain pre-compaction step ran to the loop's 200 iterations, 5.5 minutes, session
+    55). Forced here: the trial fails every time on the coarse frictional squeeze, whose
+    slow steps need the stiffening. Measured (2026-12-07): two steps retried, at most 6
+    coupling iterations a step; without the rule one step took 51."""
+    from softgrains.contact import coupling
+
+    monkeypatch.setattr(coupling._StiffeningTrial, "failed", lambda self, k, measure: True)
+    bench = _benchmark()
+    sim = Simulation(load_case(bench.squeeze_case(10, 3000.0, 0.1, overrides={
+        "contact.friction": 0.5})))
+    iterations = []
+    while not sim.at_end:
+        iterations.append(sim.step().contact.iterations)
+    assert sim.retried_steps > 0
+    assert max(iterations) <= 2 * coupling.AUTO_TANGENT_ITERATIONS, iterations

@@ -250,6 +250,9 @@ class Progress:
     # the last FAILED_SOLVES_IN_A_ROW (failed solve's residual, measure), in a row
     failing: list[tuple[float, float]] = field(default_factory=list)
     unsolved: bool = False  # stalled because the contact solves kept failing
+    # stalled because the loop stayed slow after its stiffened rotations were undone
+    # (STIFFENING_TRIAL; set by the loop)
+    slow: bool = False
     # a failed solve's fallbacks gained nothing (FUTILE_FALLBACK_GAIN): the next solves
     # skip them until the iteration changes
     futile_fallbacks: bool = False
@@ -588,6 +591,13 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 slots.W = [None] * len(slots.W)
                 progress.restart()
                 continue
+            if slow and stiffening_failed:
+                # slow with the stiffened rotations and without: a shorter step (session
+                # 55: a 1000-grain pre-compaction step whose stiffening was undone went on
+                # converging at a slow linear rate, the stall test's "descending" each
+                # iteration, to the loop's 200 iterations, 5.5 minutes)
+                diag.stalled = progress.slow = True
+                break
         diag.sweeps += result.iterations + result.warmup
         # the combined step: Newton direction plus the response to the impulse changes,
         # du + X ΔQ = −A⁻¹ R(u; P_new), taken with the line search
@@ -728,6 +738,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                     f"stalled after {diag.iterations} iterations, its contact solves failed "
                     f"in the last {FAILED_SOLVES_IN_A_ROW} (none 10% below the first)"
                     if progress.unsolved else
+                    f"stalled after {diag.iterations} iterations, still slow "
+                    f"{AUTO_TANGENT_ITERATIONS} iterations after the bodies' stiffened "
+                    "rotations were undone" if progress.slow else
                     f"stalled after {diag.iterations} iterations, no progress in the last "
                     f"{STALL_ITERATIONS}") if diag.stalled else
                    f"did not converge in {settings.max_iterations} iterations")
