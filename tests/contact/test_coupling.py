@@ -849,21 +849,27 @@ def test_stiffened_rotations_stay_only_while_the_loop_makes_progress_with_them()
     """_StiffeningTrial (coupling.py): the measures of the quasi-static squeeze's slow steps
     after the switch (883 → 33.5 → 3.3, session 55's trace) keep the stiffened rotations;
     the 100-grain deposit's (3.21e3 at the switch, then +1.8% an iteration) undo them
-    STIFFENING_TRIAL iterations after the switch; and help that stops (a fall to 1.17,
-    then +1.7% an iteration) undoes them STIFFENING_TRIAL iterations after the last 10%
-    improvement."""
+    after STIFFENING_TRIAL measures; help that stops (a fall to 1.17, then +1.7% an
+    iteration) undoes them STIFFENING_TRIAL measures after the last 10% improvement; and
+    a restart (the problem changed: corrected gaps, a larger working set) starts the
+    trial again from the next measure."""
     from softgrains.contact.coupling import STIFFENING_TRIAL, _StiffeningTrial
 
-    squeeze = _StiffeningTrial(9, 883.0, [0])
-    assert not squeeze.failed(10, 33.5) and not squeeze.failed(11, 3.31)
-    deposit = _StiffeningTrial(10, 3.21e3, [0])
+    squeeze = _StiffeningTrial(883.0, [0])
+    assert not squeeze.failed(33.5) and not squeeze.failed(3.31)
+    deposit = _StiffeningTrial(3.21e3, [0])
     rising = [3.21e3 * 1.018 ** j for j in range(1, 10)]
-    undone = next(j for j, m in enumerate(rising, start=1) if deposit.failed(10 + j, m))
+    undone = next(j for j, m in enumerate(rising, start=1) if deposit.failed(m))
     assert undone == STIFFENING_TRIAL
-    helped = _StiffeningTrial(10, 1.58e3, [0])
+    helped = _StiffeningTrial(1.58e3, [0])
     measures = [26.1, 2.93, 1.17] + [1.17 * 1.017 ** j for j in range(1, 10)]
-    undone = next(j for j, m in enumerate(measures, start=1) if helped.failed(10 + j, m))
+    undone = next(j for j, m in enumerate(measures, start=1) if helped.failed(m))
     assert undone == 3 + STIFFENING_TRIAL
+    restarted = _StiffeningTrial(1.0, [0])
+    for _ in range(STIFFENING_TRIAL - 1):
+        assert not restarted.failed(5.0)
+    restarted.restart()
+    assert not restarted.failed(50.0)  # the new problem's first measure is its best
 
 
 def test_a_deposit_step_is_not_held_back_by_stiffened_rotations_that_do_not_help(

@@ -129,6 +129,12 @@ FAILED_SOLVES_IN_A_ROW = 3
 # quasi-static squeezes they were made for, the measure falls 10-30× at the first
 # iteration after the switch, and the loop converges at the next)
 STIFFENING_TRIAL = 3
+# ... and once undone the loop gets this many more iterations, as many as the stall test
+# gave the stiffened loop before (session 55: a 1000-grain pre-compaction step, its
+# stiffening undone, went on converging at a slow linear rate, the stall test's
+# "descending" every iteration, to the loop's 200 iterations, 5.5 minutes; a shorter step
+# does better)
+RELAXED_ITERATIONS = 40
 # a failed solve whose fallbacks ended above this fraction of the stalled Newton's residual
 # (they gained less than 10%) makes the loop's next solves skip them until the iteration
 # changes (Progress.restart): session 37, seed 3's frictional step 270 (2222 contacts, W
@@ -250,9 +256,11 @@ class Progress:
     # the last FAILED_SOLVES_IN_A_ROW (failed solve's residual, measure), in a row
     failing: list[tuple[float, float]] = field(default_factory=list)
     unsolved: bool = False  # stalled because the contact solves kept failing
-    # stalled because the loop stayed slow after its stiffened rotations were undone
-    # (STIFFENING_TRIAL; set by the loop)
+    # stalled because the loop had not converged RELAXED_ITERATIONS iterations after its
+    # stiffened rotations were undone (set by the loop)
     slow: bool = False
+    # the momentum form's stiffened rotations on trial (set by the loop; restarted with it)
+    trial: _StiffeningTrial | None = None
     # a failed solve's fallbacks gained nothing (FUTILE_FALLBACK_GAIN): the next solves
     # skip them until the iteration changes
     futile_fallbacks: bool = False
@@ -288,10 +296,17 @@ class Progress:
                                                       strict=True))
         return self.since >= STALL_ITERATIONS and not descending
 
+    def last(self) -> float:
+        """The last measure recorded since the last restart (inf: none)."""
+        return self.recent[-1] if self.recent else math.inf
+
     def restart(self) -> None:
-        """Forget the best (the iteration changed: a new tangent, corrected gaps)."""
+        """Forget the best (the iteration changed: a new tangent, corrected gaps); a
+        stiffening on trial starts its trial again."""
         self.best, self.since, self.recent, self.residuals = math.inf, 0, [], []
         self.failing, self.futile_fallbacks = [], False
+        if self.trial is not None:
+            self.trial.restart()
 
 
 @dataclass
@@ -483,9 +498,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
     slots = None
     left_out = None  # a contact left out that closed, when that ended the last iteration
     progress, finished = Progress(), False
-    measure = math.inf  # the loop's last stall measure (Progress)
-    trial = None  # the stiffened rotations on trial (_StiffeningTrial)
-    stiffening_failed = False  # they were undone: no more stiffening in this step
+    undone_at = None  # the iteration at which stiffened rotations were undone (none again)
     short_gap = None  # (contact, true end gap, floor) when the end-gap check did not settle
     for k in range(1, settings.max_iterations + 1):
         # the Newton direction of every body not converged, with the current impulses
@@ -576,7 +589,7 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             # is the deformation-scale retry's, solvers.solve)
             slow = k - tangent_from >= AUTO_TANGENT_ITERATIONS
             switched = [i for i, b in steps.items()
-                        if (not b.momentum_form or (slow and not stiffening_failed))
+                        if (not b.momentum_form or (slow and undone_at is None))
                         and b.use_projected_tangent()]
             if switched:
                 # (a body of the momentum form stiffens its rotations instead, on trial
@@ -584,20 +597,14 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 # before the next one)
                 failed_solves, tangent_from = 0, k
                 stiffened = [i for i in switched if steps[i].momentum_form]
-                if stiffened:
-                    trial = _StiffeningTrial(k, measure, stiffened)
+                before = progress.last()
                 for i in switched:
                     done[i] = False
                 slots.W = [None] * len(slots.W)
                 progress.restart()
+                if stiffened:
+                    progress.trial = _StiffeningTrial(before, stiffened)
                 continue
-            if slow and stiffening_failed:
-                # slow with the stiffened rotations and without: a shorter step (session
-                # 55: a 1000-grain pre-compaction step whose stiffening was undone went on
-                # converging at a slow linear rate, the stall test's "descending" each
-                # iteration, to the loop's 200 iterations, 5.5 minutes)
-                diag.stalled = progress.slow = True
-                break
         diag.sweeps += result.iterations + result.warmup
         # the combined step: Newton direction plus the response to the impulse changes,
         # du + X ΔQ = −A⁻¹ R(u; P_new), taken with the line search
@@ -692,16 +699,20 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
             ratios = [diag.residual / settings.tolerance] + [
                 b.residual_ratio(p_scale * b.impulse_weight) for b in steps.values()]
             measure = max(ratios)
-            if trial is not None and trial.failed(k, measure):
+            if progress.trial is not None and progress.trial.failed(measure):
                 # it did not help: the rotations as they were, for the rest of the step
-                for i in trial.bodies:
+                for i in progress.trial.bodies:
                     if steps[i].relax_rotation():
                         done[i] = False
-                trial, stiffening_failed, tangent_from = None, True, k
+                progress.trial, undone_at = None, k
+                failed_solves, tangent_from = 0, k
                 slots.W = [None] * len(slots.W)
                 diag.stiffenings_undone += 1
                 progress.restart()
                 continue
+            if undone_at is not None and k - undone_at >= RELAXED_ITERATIONS:
+                diag.stalled = progress.slow = True  # (a shorter step does better)
+                break
             if progress.stalled(measure, np.array(ratios),
                                 result.residual if failed else None):
                 diag.stalled = True
@@ -738,9 +749,9 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                     f"stalled after {diag.iterations} iterations, its contact solves failed "
                     f"in the last {FAILED_SOLVES_IN_A_ROW} (none 10% below the first)"
                     if progress.unsolved else
-                    f"stalled after {diag.iterations} iterations, still slow "
-                    f"{AUTO_TANGENT_ITERATIONS} iterations after the bodies' stiffened "
-                    "rotations were undone" if progress.slow else
+                    f"stalled after {diag.iterations} iterations, not converged "
+                    f"{RELAXED_ITERATIONS} iterations after the bodies' stiffened rotations "
+                    "were undone" if progress.slow else
                     f"stalled after {diag.iterations} iterations, no progress in the last "
                     f"{STALL_ITERATIONS}") if diag.stalled else
                    f"did not converge in {settings.max_iterations} iterations")
@@ -753,6 +764,8 @@ def solve_coupled(lattice: Lattice, steps: dict, fields: list[NodalField], walls
                 + ("); the contact problem has no solution within the tolerance at these "
                    "iterates: try a smaller dt (or more [simulation] retry_halvings)."
                    if diag.stalled and progress.unsolved else
+                   "); it converges too slowly at this step: try a smaller dt (or more "
+                   "[simulation] retry_halvings)." if diag.stalled and progress.slow else
                    "); a cycle that more iterations do not cure: try a smaller dt (or more "
                    "[simulation] retry_halvings)." if diag.stalled else
                    "); try a smaller dt, more contact max_iterations"
@@ -837,20 +850,26 @@ def _points_motion(nodes, N, active_row, u, du, limit):
 @dataclass
 class _StiffeningTrial:
     """The stiffened rotations of ``bodies`` on trial (STIFFENING_TRIAL): ``best``, the
-    loop's least stall measure since the switch (at first: its value at the switch), last
-    improved at coupling iteration ``at`` (at first: the switch's)."""
+    loop's least stall measure since the switch (at first: its value before it, inf where
+    none was recorded since the loop's last restart) or since the trial's last restart
+    (inf), and the measures recorded since it last improved (``since``)."""
 
-    at: int
     best: float
     bodies: list[int]
+    since: int = 0
 
-    def failed(self, k: int, measure: float) -> bool:
-        """Record iteration k's measure; True once STIFFENING_TRIAL iterations have passed
-        without one below STALL_DECREASE × the best before it."""
+    def failed(self, measure: float) -> bool:
+        """Record an iteration's measure; True once STIFFENING_TRIAL measures in a row are
+        none below STALL_DECREASE × the best before them."""
         if measure < STALL_DECREASE * self.best:
-            self.best, self.at = measure, k
+            self.best, self.since = measure, 0
             return False
-        return k - self.at >= STIFFENING_TRIAL
+        self.since += 1
+        return self.since >= STIFFENING_TRIAL
+
+    def restart(self) -> None:
+        """The problem changed (Progress.restart): the trial starts again."""
+        self.best, self.since = math.inf, 0
 
 
 def motion_bounded_step(step, du: np.ndarray, limit: float, at: int) -> np.ndarray:

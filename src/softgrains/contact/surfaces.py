@@ -228,21 +228,30 @@ def _norm(a, p):
     return np.sqrt(total)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
-def _calibrated_point(c, length, radius, xi, profile, slope):
-    """:func:`calibrated_distance` at one point of field c and ‖∇c‖ = ``length``: (d, λ).
-    (NumPy's error model: 0/0 is NaN where ∇c vanishes.)"""
-    inside = np.interp(min(max(c, profile[1]), profile[-2]), profile, xi)
-    lam = radius * length / np.interp(inside, xi, slope)
-    return (-radius * inside if c > 0.0 else np.inf), lam
+@njit(cache=True, error_model="numpy")
+def _calibrated(value, length, radius, xi, profile, slope, distance, lam):
+    """:func:`calibrated_distance` from c and ‖∇c‖ = ``length`` at each point, into
+    ``distance`` and ``lam`` (NumPy's error model: 0/0 is NaN where ∇c vanishes). The
+    profile is interpolated over all points at once: a point at a time, each search
+    started afresh, took 2.5× as long."""
+    n = value.shape[0]
+    clipped = np.empty(n)
+    for p in range(n):
+        clipped[p] = min(max(value[p], profile[1]), profile[-2])
+    inside = np.interp(clipped, profile, xi)
+    at = np.interp(inside, xi, slope)
+    for p in range(n):
+        distance[p] = -radius * inside[p] if value[p] > 0.0 else np.inf
+        lam[p] = radius * length[p] / at[p]
 
 
 @njit(cache=True, error_model="numpy")
 def _calibrated_distances(value, grad, radius, xi, profile, slope, distance, lam):
-    """:func:`calibrated_distance`, point by point."""
+    """:func:`calibrated_distance` of the field's value and gradient."""
+    length = np.empty(grad.shape[0])
     for p in range(grad.shape[0]):
-        distance[p], lam[p] = _calibrated_point(value[p], _norm(grad, p), radius, xi,
-                                                profile, slope)
+        length[p] = _norm(grad, p)
+    _calibrated(value, length, radius, xi, profile, slope, distance, lam)
 
 
 class KernelSurface:
@@ -402,10 +411,9 @@ def cell_support(F: np.ndarray, n: np.ndarray, spacing: float, round_body: bool
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _cell_support_point(F, n, p, spacing, round_body, r):
-    """:func:`cell_support` of point p: r[p] (n[p] NaN counts as 0)."""
+def _cell_support_point(F, n, p, spacing, round_body, r, FTn):
+    """:func:`cell_support` of point p: r[p] (n[p] NaN counts as 0; ``FTn``: d scratch)."""
     d = n.shape[1]
-    FTn = np.empty(d)
     size = 0.0
     for i in range(d):
         acc = 0.0
@@ -425,8 +433,9 @@ def _cell_support_point(F, n, p, spacing, round_body, r):
 @njit(cache=True, error_model="numpy")
 def _cell_supports(F, n, spacing, round_body, r):
     """:func:`cell_support`, point by point."""
+    FTn = np.empty(n.shape[1])
     for p in range(n.shape[0]):
-        _cell_support_point(F, n, p, spacing, round_body, r)
+        _cell_support_point(F, n, p, spacing, round_body, r, FTn)
 
 
 def edge_gap(distance: np.ndarray, n: np.ndarray, F: np.ndarray, spacing: float,
@@ -526,19 +535,22 @@ def surface_gaps(c: np.ndarray, grad: np.ndarray, F: np.ndarray, radius: float,
 @njit(cache=True, error_model="numpy")
 def _gaps_from_field(c, grad, F, radius, xi, profile, slope, spacing, length, n_out, gap,
                      support):
-    """:func:`surface_gaps`, point by point: calibrated_distance's and cell_support's
-    per-point functions, then edge_gap's sum (NumPy's error model: 0/0 is NaN)."""
+    """:func:`surface_gaps`: calibrated_distance's arithmetic, the normals, cell_support's
+    per-point arithmetic, then edge_gap's sum (NumPy's error model: 0/0 is NaN)."""
     n, d = grad.shape
     for p in range(n):
         length[p] = _norm(grad, p)
-        distance, lam = _calibrated_point(c[p], length[p], radius, xi, profile, slope)
+    distance, lam = np.empty(n), np.empty(n)
+    _calibrated(c, length, radius, xi, profile, slope, distance, lam)
+    FTn = np.empty(d)
+    for p in range(n):
         for i in range(d):
             n_out[p, i] = -grad[p, i] / length[p]
-        _cell_support_point(F, n_out, p, spacing, True, support)
+        _cell_support_point(F, n_out, p, spacing, True, support, FTn)
         along = 0.0
         for i in range(d):
             along += n_out[p, i] * support[p, i]
-        gap[p] = (distance + along) / lam
+        gap[p] = (distance[p] + along) / lam[p]
 
 
 def least_unsampled_gap(one_pass: frozenset, steps: dict, spacing: float, reach: float,

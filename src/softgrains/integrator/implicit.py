@@ -403,6 +403,7 @@ class BodyStep:
         self._mirrored_at = None  # (u, A⁺) made by mirror_negative_modes at that u
         self._exact = None  # momentum form: the exact (non-symmetric) Newton matrix
         self._stiff_rotation = False  # momentum form: stiffen_rotation was called
+        self._relaxed = False  # ... and relax_rotation undid it: not again in this step
         self._rotations = None  # momentum form: the body's RigidRotations (set up once)
         self._rotation_block = None  # ... and their block B in the latest Newton matrix
         self.contact_impulse = np.zeros_like(u)  # Σ P received at each row this step
@@ -418,10 +419,10 @@ class BodyStep:
 
     def can_project(self) -> bool:
         """Whether :meth:`use_projected_tangent` would switch (``auto``, still exact; with
-        the momentum form: its rotation not stiffened yet)."""
+        the momentum form: its rotation not stiffened yet, nor relaxed in this step)."""
         if self.settings.tangent != "auto" or self._projected:
             return False
-        return not (self.momentum_form and self._stiff_rotation)
+        return not (self.momentum_form and (self._stiff_rotation or self._relaxed))
 
     def use_projected_tangent(self) -> bool:
         """With ``tangent = "auto"``, switch to the projected tangent for the rest of the
@@ -455,12 +456,13 @@ class BodyStep:
         return True
 
     def relax_rotation(self) -> bool:
-        """Undo :meth:`stiffen_rotation`: the Newton matrix's rotations take their inertia
-        alone again (the coupling loop, where the stiffening did not help:
-        coupling.STIFFENING_TRIAL). True if they were stiffened."""
+        """Undo :meth:`stiffen_rotation` for the rest of the step: the Newton matrix's
+        rotations take their inertia alone again, and :meth:`stiffen_rotation` (the other
+        fallbacks' too) refuses from now on (the coupling loop, where the stiffening did not
+        help: coupling.STIFFENING_TRIAL). True if they were stiffened."""
         if not self._stiff_rotation:
             return False
-        self._stiff_rotation = False
+        self._stiff_rotation, self._relaxed = False, True
         self._A = self._lu = None
         return True
 
