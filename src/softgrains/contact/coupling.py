@@ -121,7 +121,8 @@ STUCK_RESOLUTION = 1e-9
 FAILED_SOLVES_IN_A_ROW = 3
 # the momentum form's stiffened rotations (the auto tangent's remedy of a slow loop) stay
 # while the loop makes progress with them: its measure below STALL_DECREASE × its best
-# since the switch (at first: its value then) at least once every this many iterations;
+# since the switch (at first: its value then) at least once in this many measures (Progress:
+# one an iteration that took a step; the count starts again where the problem changes);
 # else they are undone for the rest of the step (session 55: in the 100-grain
 # pre-compaction, at 4e-4 s a step, loops about to converge at their 10th iteration were
 # slowed by them to line-search steps of 2^-8, the measure rising 0.4% an iteration, until
@@ -852,7 +853,7 @@ class _StiffeningTrial:
     """The stiffened rotations of ``bodies`` on trial (STIFFENING_TRIAL): ``best``, the
     loop's least stall measure since the switch (at first: its value before it, inf where
     none was recorded since the loop's last restart) or since the trial's last restart
-    (inf), and the measures recorded since it last improved (``since``)."""
+    (inf), and how many measures were recorded since it last improved (``since``)."""
 
     best: float
     bodies: list[int]
