@@ -212,10 +212,10 @@ def calibrated_distance(value: np.ndarray, grad: np.ndarray, radius: float
     and λ = ‖∇d‖ = R‖∇c‖/F'(F⁻¹(c)) (1 across a flat boundary), so that ḋ = λ (n·ẋ − ∂c/∂t
     /‖∇c‖). Where c is 0 (beyond the kernel's reach) d is +inf."""
     xi, profile, slope = PROFILES[grad.shape[1]]
-    distance, lam = np.empty(len(grad)), np.empty(len(grad))
+    length, distance, lam = np.empty(len(grad)), np.empty(len(grad)), np.empty(len(grad))
     _calibrated_distances(np.ascontiguousarray(value, float),
                           np.ascontiguousarray(grad, float), float(radius), xi, profile,
-                          slope, distance, lam)
+                          slope, length, distance, lam)
     return distance, lam
 
 
@@ -229,29 +229,21 @@ def _norm(a, p):
 
 
 @njit(cache=True, error_model="numpy")
-def _calibrated(value, length, radius, xi, profile, slope, distance, lam):
-    """:func:`calibrated_distance` from c and ‖∇c‖ = ``length`` at each point, into
-    ``distance`` and ``lam`` (NumPy's error model: 0/0 is NaN where ∇c vanishes). The
-    profile is interpolated over all points at once: a point at a time, each search
-    started afresh, took 2.5× as long."""
+def _calibrated_distances(value, grad, radius, xi, profile, slope, length, distance, lam):
+    """:func:`calibrated_distance` of the field's value c and gradient at each point, into
+    ``length`` (‖∇c‖), ``distance`` and ``lam`` (NumPy's error model: 0/0 is NaN where ∇c
+    vanishes). The profile is interpolated over all points at once: a point at a time,
+    each search started afresh, took 2.5× as long."""
     n = value.shape[0]
     clipped = np.empty(n)
     for p in range(n):
+        length[p] = _norm(grad, p)
         clipped[p] = min(max(value[p], profile[1]), profile[-2])
     inside = np.interp(clipped, profile, xi)
     at = np.interp(inside, xi, slope)
     for p in range(n):
         distance[p] = -radius * inside[p] if value[p] > 0.0 else np.inf
         lam[p] = radius * length[p] / at[p]
-
-
-@njit(cache=True, error_model="numpy")
-def _calibrated_distances(value, grad, radius, xi, profile, slope, distance, lam):
-    """:func:`calibrated_distance` of the field's value and gradient."""
-    length = np.empty(grad.shape[0])
-    for p in range(grad.shape[0]):
-        length[p] = _norm(grad, p)
-    _calibrated(value, length, radius, xi, profile, slope, distance, lam)
 
 
 class KernelSurface:
@@ -538,10 +530,8 @@ def _gaps_from_field(c, grad, F, radius, xi, profile, slope, spacing, length, n_
     """:func:`surface_gaps`: calibrated_distance's arithmetic, the normals, cell_support's
     per-point arithmetic, then edge_gap's sum (NumPy's error model: 0/0 is NaN)."""
     n, d = grad.shape
-    for p in range(n):
-        length[p] = _norm(grad, p)
     distance, lam = np.empty(n), np.empty(n)
-    _calibrated(c, length, radius, xi, profile, slope, distance, lam)
+    _calibrated_distances(c, grad, radius, xi, profile, slope, length, distance, lam)
     FTn = np.empty(d)
     for p in range(n):
         for i in range(d):
