@@ -573,16 +573,21 @@ def test_the_newton_matrix_on_the_engaged_rows_is_the_generalized_jacobian(d):
 
 
 @pytest.mark.parametrize("d", [2, 3])
-def test_newton_steps_by_row_updates_of_a_kept_factorization_solve_the_jacobian(d, monkeypatch):
+@pytest.mark.parametrize("dissected", [False, True])
+def test_newton_steps_by_row_updates_of_a_kept_factorization_solve_the_jacobian(
+        d, dissected, monkeypatch):
     """newton_matrix.NewtonMatrix: a sequence of Newton matrices J = I − G + G ρ (W + εI)
     of one problem whose G changes in a few rows (contacts opening, closing, changing
     between stick and slip) is solved on one factorization by the Woodbury identity, to
     round-off against the dense solve; past UPDATE_ROWS changed rows it factorises anew;
-    a singular J_EE gets the least-squares step of the engaged rows."""
+    a singular J_EE gets the least-squares step of the engaged rows. With J_EE's rows in
+    SuperLU's order and in nested-dissection order (a large problem's, ordering.py)."""
     from scipy import sparse
 
     from softgrains.contact import newton_matrix
     from softgrains.contact.newton_matrix import NewtonMatrix
+
+    monkeypatch.setattr(newton_matrix, "DISSECTION_ROWS", 0 if dissected else 10**9)
 
     rng = np.random.default_rng(11)
     n = 12
@@ -599,6 +604,8 @@ def test_newton_steps_by_row_updates_of_a_kept_factorization_solve_the_jacobian(
     G[: n // 2] = np.eye(d)  # half the contacts sticking, the others open
     solver = NewtonMatrix(blocks, rho, shift)
     for change in range(6):
+        if change == 1:
+            assert solver.base.dissected == dissected
         b = rng.normal(size=n * d)
         dr = solver.solve(G, b)
         np.testing.assert_allclose(dense(G) @ dr, b, atol=1e-10 * np.abs(b).max())

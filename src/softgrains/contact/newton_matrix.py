@@ -19,6 +19,7 @@ import scipy.sparse.linalg as spla
 from numba import njit
 
 from softgrains.contact.delassus import BlockRows, as_block_rows, differing_rows, nonzero_rows
+from softgrains.contact.ordering import DISSECTION_ROWS, dissection_order
 
 
 @njit(cache=True)
@@ -131,6 +132,10 @@ UPDATE_ROWS = 80
 # an updated solve is kept when its residual ‖J x − b‖ is within this fraction of ‖b‖,
 # else J is factorised anew (the capacitance matrix of nearly dependent rows)
 UPDATE_RESIDUAL = 1e-9
+# a dissected J_EE's pivots: the diagonal while it is at least this fraction of its
+# column's largest entry, so that the order holds (UMFPACK's symmetric strategy's 0.1; with
+# SuperLU's partial pivoting, 1.0, the 1000-grain J_EE's factors hold 9.2 M entries, not 7.0)
+DIAGONAL_PIVOT = 0.1
 # the kept solves J0⁻¹ e_r (|E| floats each) of one factorization: at most this many, then
 # J is factorised anew
 KEPT_SOLVES = 4 * UPDATE_ROWS
@@ -144,14 +149,25 @@ class _Factorization:
 
     def __init__(self, W: BlockRows, G: np.ndarray, rho: np.ndarray, shift: float):
         self.G = G.copy()
+        # E in the order J_EE is factorised: a large problem's by nested dissection
+        # (ordering.py; SuperLU then keeps it, preferring diagonal pivots), else sorted
         self.engaged = np.flatnonzero(_engaged(G))
+        self.dissected = self.engaged.size >= DISSECTION_ROWS
+        if self.dissected:
+            self.engaged = dissection_order(W, self.engaged)
         self.outside, self.position = _positions(self.engaged, G.shape[0] * G.shape[1])
         self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, self.position)
         # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
         # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
         # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26). Raises
         # RuntimeError where J_EE is singular
-        self.lu = spla.splu(self.J_ee.T) if self.engaged.size else None
+        if not self.engaged.size:
+            self.lu = None
+        elif self.dissected:
+            self.lu = spla.splu(self.J_ee.T, permc_spec="NATURAL",
+                                diag_pivot_thresh=DIAGONAL_PIVOT)
+        else:
+            self.lu = spla.splu(self.J_ee.T)
         # the kept solves' rows E as the columns of one array (|E|, capacity), and each row
         # r's column in it
         self.unit_solves = np.empty((self.engaged.size, 0))

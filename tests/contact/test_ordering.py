@@ -1,0 +1,64 @@
+"""The nested-dissection order of the contact Newton matrix's engaged rows (ordering.py)."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from softgrains.contact.delassus import BlockRows
+from softgrains.contact.newton_matrix import NewtonMatrix
+from softgrains.contact.ordering import DISSECTION_ROWS, dissection_order
+
+
+def lattice_delassus(k: int, d: int, seed: int = 0) -> sp.bsr_matrix:
+    """W = H Hᵀ + I/10 for k × k grains on a square lattice, one contact between each pair
+    of neighbours, H_c = [R_c on its first grain, −R_c on its second] (R_c random d × d):
+    W's block c c' is not zero where contacts c and c' touch a common grain, as a packing's."""
+    rng = np.random.default_rng(seed)
+    grain = np.arange(k * k).reshape(k, k)
+    pairs = np.vstack([np.c_[grain[:, :-1].ravel(), grain[:, 1:].ravel()],
+                       np.c_[grain[:-1].ravel(), grain[1:].ravel()]])
+    n = len(pairs)
+    R = rng.normal(size=(n, d, d))
+    H = sp.bsr_matrix((np.concatenate([R[:, None], -R[:, None]], axis=1).reshape(-1, d, d),
+                       pairs.ravel(), np.arange(0, 2 * n + 1, 2)),
+                      shape=(n * d, k * k * d))
+    return sp.bsr_matrix((H @ H.T + 0.1 * sp.identity(n * d)).tocsr(), blocksize=(d, d))
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_the_order_keeps_each_contacts_rows_together_in_component_order(d):
+    """Every engaged row once; a contact's rows adjacent, normal first (the order only
+    permutes contacts)."""
+    W = BlockRows.from_bsr(lattice_delassus(8, d))
+    rng = np.random.default_rng(1)
+    rows = np.flatnonzero(rng.uniform(size=W.n * d) < 0.7)
+    order = dissection_order(W, rows)
+    assert np.array_equal(np.sort(order), rows)
+    contact = order // d
+    starts = np.flatnonzero(np.r_[True, contact[1:] != contact[:-1]])
+    assert starts.size == np.unique(contact).size  # each contact in one run
+    runs = np.split(order, starts[1:])
+    assert all(np.all(np.diff(run) > 0) for run in runs)
+
+
+def test_a_large_contact_network_is_factorised_with_less_fill_and_solves_the_same():
+    """A 40 × 40-grain lattice's 3120 contacts, all sticking (J_EE = ρ W, 6240 rows, past
+    DISSECTION_ROWS): the dissected factors hold under 60% of SuperLU's own ordering's
+    entries (measured 0.41), and the Newton step solves J dr = b to round-off."""
+    d = 2
+    W = lattice_delassus(40, d)
+    n = W.shape[0] // d
+    assert n * d >= DISSECTION_ROWS
+    G = np.broadcast_to(np.eye(d), (n, d, d)).copy()
+    rho = np.full(n, 0.5)
+    solver = NewtonMatrix(W, rho)
+    b = np.random.default_rng(2).normal(size=n * d)
+    dr = solver.solve(G, b)
+    J = 0.5 * W.tocsr()
+    np.testing.assert_allclose(J @ dr, b, atol=1e-9 * np.abs(b).max())
+    lu = solver.base.lu
+    assert solver.base.dissected
+    reference = spla.splu(J.T.tocsc())
+    ratio = (lu.L.nnz + lu.U.nnz) / (reference.L.nnz + reference.U.nnz)
+    assert ratio < 0.6, ratio
