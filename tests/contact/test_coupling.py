@@ -232,26 +232,32 @@ def test_a_frictionless_contact_s_tangential_compliance_is_no_part_of_the_check(
 
     from softgrains.contact.coupling import _impulse_basis, _semidefinite
 
+    def touching(slots):  # the body's contacts as first body, as second
+        return np.flatnonzero(slots.a_slot == 0), np.flatnonzero(slots.b_slot == 0)
+
     slots = SimpleNamespace(d=2, k_size=np.array([2]), a_slot=np.array([0, -1]),
                             a_col=np.array([0, 0]), b_slot=np.array([-1, 0]),
                             b_col=np.array([0, 1]))
     normal = np.array([[1.0, 0.0], [0.6, 0.8]])
     tangent = np.array([0.0, 0.0, -0.8, 0.6])  # column 1's tangent
     W = np.eye(4) - 2.0 * np.outer(tangent, tangent)
-    basis = _impulse_basis(slots, 0, normal, np.array([0.5, 0.0]))
+    basis = _impulse_basis(slots, 0, touching(slots), normal, np.array([0.5, 0.0]))
     np.testing.assert_array_equal(basis, [[1, 0, 0], [0, 1, 0], [0, 0, 0.6], [0, 0, 0.8]])
     assert _semidefinite(W, basis) and not _semidefinite(W)
-    assert _impulse_basis(slots, 0, normal, np.array([0.5, 0.5])) is None
+    assert _impulse_basis(slots, 0, touching(slots), normal,
+                          np.array([0.5, 0.5])) is None
     # column 1 shared by two contacts: both frictionless, their two normals; one of them
     # frictional, every component
     shared = SimpleNamespace(d=2, k_size=np.array([2]), a_slot=np.array([0, -1, 0]),
                              a_col=np.array([0, 0, 1]), b_slot=np.array([-1, 0, -1]),
                              b_col=np.array([0, 1, 0]))
     normals = np.array([[1.0, 0.0], [0.6, 0.8], [0.0, 1.0]])
-    basis = _impulse_basis(shared, 0, normals, np.array([0.5, 0.0, 0.0]))
+    basis = _impulse_basis(shared, 0, touching(shared), normals,
+                           np.array([0.5, 0.0, 0.0]))
     np.testing.assert_array_equal(basis, [[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 0, 0.6],
                                           [0, 0, 1, 0.8]])
-    assert _impulse_basis(shared, 0, normals, np.array([0.5, 0.0, 0.5])) is None
+    assert _impulse_basis(shared, 0, touching(shared), normals,
+                          np.array([0.5, 0.0, 0.5])) is None
 
 
 def test_the_mirrored_matrix_of_the_iterate_is_made_once(monkeypatch):

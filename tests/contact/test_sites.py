@@ -6,7 +6,14 @@ import scipy.sparse as sp
 
 from softgrains.contact.detection import ContactNodes
 from softgrains.contact.problem import row_impulses
-from softgrains.contact.sites import SideStencils, Slots, _site_map, _site_rows_of, subset
+from softgrains.contact.sites import (
+    Members,
+    SideStencils,
+    Slots,
+    _site_map,
+    _site_rows_of,
+    subset,
+)
 
 
 def _contacts_and_stencils(rng, nodal: bool, n: int = 9, d: int = 2):
@@ -137,3 +144,13 @@ def test_distinct_pairs_are_the_sorted_set_of_pairs():
     expected = sorted({(int(a), int(b)) for a, b in zip(alpha, beta, strict=True)})
     assert _distinct_pairs(alpha, beta) == expected
     assert _distinct_pairs(alpha[:0], beta[:0]) == []
+
+
+def test_members_are_the_indices_of_each_owner_ascending():
+    """sites.Members(owner)(v) is np.flatnonzero(owner == v) for every v (walls −1, bodies
+    with no contact, repeated owners), from one sort instead of a pass over all contacts a
+    body."""
+    owner = np.random.default_rng(5).integers(-1, 40, size=500)
+    of = Members(owner)
+    for v in range(-2, 42):
+        np.testing.assert_array_equal(of(v), np.flatnonzero(owner == v))

@@ -74,7 +74,13 @@ from softgrains.contact.problem import (
     row_impulses,
     velocity_scale,
 )
-from softgrains.contact.sites import Slots, point_contacts, subset, with_point_contacts
+from softgrains.contact.sites import (
+    Members,
+    Slots,
+    point_contacts,
+    subset,
+    with_point_contacts,
+)
 from softgrains.contact.solvers import ContactSolverOptions, solve
 from softgrains.contact.surfaces import select
 from softgrains.errors import SimulationError
@@ -910,8 +916,12 @@ def _working_slots(everywhere: Slots, normal: np.ndarray, member: np.ndarray,
     their indices."""
     chosen = np.flatnonzero(member)
     slots = everywhere.restricted(chosen)
-    slots.impulse_basis = [_impulse_basis(slots, slot, normal[chosen], mu[chosen])
-                           for slot in range(len(slots.bodies))]
+    # (the chosen normals and μ taken once, and each body's contacts from one sort: per
+    # body they read every contact, O(bodies × contacts), 0.4 s a step at 1000 grains)
+    first, second = Members(slots.a_slot), Members(slots.b_slot)
+    normal, mu = normal[chosen], mu[chosen]
+    slots.impulse_basis = [_impulse_basis(slots, slot, (first(slot), second(slot)), normal,
+                                          mu) for slot in range(len(slots.bodies))]
     return slots, chosen
 
 
@@ -956,14 +966,15 @@ def _switch_indefinite(steps: dict, slots: Slots) -> list[int]:
     return switched
 
 
-def _impulse_basis(slots: Slots, slot: int, normal: np.ndarray, mu: np.ndarray
-                   ) -> np.ndarray | None:
-    """Vectors spanning the impulses body ``slot``'s contacts can carry, in its W_s's
-    (column, component) order: every component at a column with a frictional contact,
-    the normals at the others (a frictionless contact carries no tangential impulse, so
-    W_s's tangential part is no part of the problem). None: every component."""
+def _impulse_basis(slots: Slots, slot: int, touching: tuple[np.ndarray, np.ndarray],
+                   normal: np.ndarray, mu: np.ndarray) -> np.ndarray | None:
+    """Vectors spanning the impulses body ``slot``'s contacts (``touching``: those where it
+    is the first body, and the second) can carry, in its W_s's (column, component) order:
+    every component at a column with a frictional contact, the normals at the others (a
+    frictionless contact carries no tangential impulse, so W_s's tangential part is no
+    part of the problem). None: every component."""
     d, k = slots.d, int(slots.k_size[slot])
-    a, b = np.flatnonzero(slots.a_slot == slot), np.flatnonzero(slots.b_slot == slot)
+    a, b = touching
     contact, column = np.r_[a, b], np.r_[slots.a_col[a], slots.b_col[b]]
     frictional = np.zeros(k, bool)
     frictional[column[mu[contact] > 0.0]] = True

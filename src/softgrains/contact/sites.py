@@ -43,6 +43,22 @@ def subset(contacts: ContactNodes, keep: np.ndarray) -> ContactNodes:
                         None if contacts.position is None else contacts.position[keep])
 
 
+class Members:
+    """The indices i with owner[i] == v, ascending, for any v, from one stable sort: what
+    ``np.flatnonzero(owner == v)`` gives, without reading all of ``owner`` for each v (over
+    every body that read was O(bodies × contacts): at 1000 grains ~0.7 s a step in the slots'
+    set-up, session 56)."""
+
+    def __init__(self, owner: np.ndarray) -> None:
+        self.order = np.argsort(owner, kind="stable")
+        self.owners = owner[self.order]
+
+    def __call__(self, value: int) -> np.ndarray:
+        lo = np.searchsorted(self.owners, value, side="left")
+        hi = np.searchsorted(self.owners, value, side="right")
+        return self.order[lo:hi]
+
+
 class Slots:
     """The deformable bodies in contact, their contact sites and compliances.
 
@@ -68,11 +84,12 @@ class Slots:
             stencils = nodal_stencils(steps, contacts)
         sides = ((contacts.alpha, stencils[0], self.a_slot, self.a_col),
                  (contacts.beta, stencils[1], self.b_slot, self.b_col))
-        body_ids = sorted({int(b) for b in np.r_[contacts.alpha, contacts.beta]
-                           if int(b) in steps})
+        body_ids = [int(b) for b in np.unique(np.r_[contacts.alpha, contacts.beta])
+                    if int(b) in steps]
+        members = [Members(bodies) for bodies, *_ in sides]
         for slot, body in enumerate(body_ids):
-            parts = [(np.flatnonzero(bodies == body), st, slots, cols)
-                     for bodies, st, slots, cols in sides]
+            parts = [(of(body), st, slots, cols)
+                     for of, (_, st, slots, cols) in zip(members, sides, strict=True)]
             keys = np.concatenate([st.key[c] for c, st, *_ in parts])
             site_keys, first, inverse = np.unique(keys, return_index=True,
                                                   return_inverse=True)
@@ -116,8 +133,9 @@ class Slots:
         renumber = -np.ones(len(self.bodies) + 1, np.int64)  # (index −1: a wall, kept −1)
         renumber[used] = np.arange(used.size)
         new.bodies, new.rows, new.H = [], [], []
+        a_members, b_members = Members(new.a_slot), Members(new.b_slot)
         for old in used:
-            on_a, on_b = new.a_slot == old, new.b_slot == old
+            on_a, on_b = a_members(old), b_members(old)
             cols = np.unique(np.r_[new.a_col[on_a], new.b_col[on_b]])
             new.a_col[on_a] = np.searchsorted(cols, new.a_col[on_a])
             new.b_col[on_b] = np.searchsorted(cols, new.b_col[on_b])
