@@ -62,3 +62,25 @@ def test_a_large_contact_network_is_factorised_with_less_fill_and_solves_the_sam
     reference = spla.splu(J.T.tocsc())
     ratio = (lu.L.nnz + lu.U.nnz) / (reference.L.nnz + reference.U.nnz)
     assert ratio < 0.6, ratio
+
+
+def test_the_contact_graph_is_ws_block_pattern_among_the_contacts_symmetric():
+    """contact_graph: c ~ c' where W's block row c holds c' (both chosen), no diagonal, the
+    same as SciPy's pattern; a pattern not symmetric (by hand) is made symmetric."""
+    from softgrains.contact.ordering import contact_graph
+
+    W = lattice_delassus(6, 2)
+    rows = BlockRows.from_bsr(W)
+    chosen = np.flatnonzero(np.random.default_rng(3).uniform(size=rows.n) < 0.6)
+    ptr, adjacency = contact_graph(rows, chosen)
+    pattern = sp.csr_matrix((np.ones(W.indices.size), W.indices, W.indptr))[chosen][:, chosen]
+    pattern.setdiag(0.0)
+    pattern.eliminate_zeros()
+    pattern.sort_indices()
+    np.testing.assert_array_equal(ptr, pattern.indptr)
+    np.testing.assert_array_equal(adjacency, pattern.indices)
+    one_way = BlockRows.from_bsr(sp.bsr_matrix(np.array([[1.0, 1.0, 0.0], [0.0, 1.0, 0.0],
+                                                         [0.0, 1.0, 1.0]]), blocksize=(1, 1)))
+    ptr, adjacency = contact_graph(one_way, np.arange(3))
+    np.testing.assert_array_equal(ptr, [0, 1, 3, 4])
+    np.testing.assert_array_equal(adjacency, [1, 0, 2, 1])

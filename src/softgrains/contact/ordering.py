@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pymetis
 import scipy.sparse as sp
+from numba import njit
 
 from softgrains.contact.delassus import BlockRows
 
@@ -25,24 +26,55 @@ from softgrains.contact.delassus import BlockRows
 DISSECTION_ROWS = 2000
 
 
-def contact_graph(W: BlockRows, contacts: np.ndarray) -> sp.csr_matrix:
-    """The adjacency of ``contacts`` (sorted, distinct) in W's block pattern, as a symmetric
-    CSR pattern without its diagonal: c ~ c' where block row c holds c' (both among
-    ``contacts``)."""
+@njit(cache=True)
+def _member_pattern(start, end, indices, contacts, place):
+    """(indptr, adjacency, symmetric): block rows ``contacts`` of W's pattern (row c is
+    ``indices[start[c]:end[c]]``) restricted to the members (``place`` ≥ 0: their index),
+    without the diagonal; whether each entry (e, j) has its mirror (j, e) (W's block
+    pattern is symmetric: c and c' touch a common body; rows sorted, as delassus builds
+    them)."""
+    m = contacts.size
+    ptr = np.zeros(m + 1, np.int64)
+    for e in range(m):
+        count = 0
+        for q in range(start[contacts[e]], end[contacts[e]]):
+            j = place[indices[q]]
+            if j >= 0 and j != e:
+                count += 1
+        ptr[e + 1] = ptr[e] + count
+    adjacency = np.empty(ptr[m], np.int64)
+    for e in range(m):
+        k = ptr[e]
+        for q in range(start[contacts[e]], end[contacts[e]]):
+            j = place[indices[q]]
+            if j >= 0 and j != e:
+                adjacency[k] = j
+                k += 1
+    for e in range(m):
+        for q in range(ptr[e], ptr[e + 1]):
+            j = adjacency[q]
+            at = np.searchsorted(adjacency[ptr[j]:ptr[j + 1]], e)
+            if at == ptr[j + 1] - ptr[j] or adjacency[ptr[j] + at] != e:
+                return ptr, adjacency, False
+    return ptr, adjacency, True
+
+
+def contact_graph(W: BlockRows, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The adjacency of ``contacts`` (sorted, distinct) in W's block pattern, symmetric
+    and without its diagonal, as CSR arrays (indptr, indices): c ~ c' where block row c
+    holds c' or block row c' holds c (both among ``contacts``)."""
     W.ensure(contacts)
     place = np.full(W.n, -1, np.int64)
     place[contacts] = np.arange(contacts.size)
-    counts = W.end[contacts] - W.start[contacts]
-    rows = np.repeat(np.arange(contacts.size), counts)
-    first = np.cumsum(counts) - counts  # each row's first entry among the gathered
-    entries = np.arange(rows.size) + np.repeat(W.start[contacts] - first, counts)
-    cols = place[W.indices[entries]]
-    keep = (cols >= 0) & (cols != rows)
-    graph = sp.csr_matrix((np.ones(int(keep.sum())), (rows[keep], cols[keep])),
+    ptr, adjacency, symmetric = _member_pattern(W.start, W.end, W.indices, contacts, place)
+    if symmetric:
+        return ptr, adjacency
+    # (a pattern given by hand, e.g. a BSR matrix in a test: made symmetric)
+    graph = sp.csr_matrix((np.ones(adjacency.size), adjacency, ptr),
                           shape=(contacts.size, contacts.size))
     graph = (graph + graph.T).tocsr()
     graph.sort_indices()
-    return graph
+    return graph.indptr.astype(np.int64), graph.indices.astype(np.int64)
 
 
 def dissection_order(W: BlockRows, rows: np.ndarray) -> np.ndarray:
@@ -50,9 +82,7 @@ def dissection_order(W: BlockRows, rows: np.ndarray) -> np.ndarray:
     nested dissection of their contacts' graph, a contact's rows kept together."""
     d = W.d
     contacts, owner = np.unique(rows // d, return_inverse=True)
-    graph = contact_graph(W, contacts)
-    perm, _ = pymetis.nested_dissection(
-        pymetis.CSRAdjacency(graph.indptr.astype(np.int64), graph.indices.astype(np.int64)))
+    perm, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(*contact_graph(W, contacts)))
     rank = np.empty(contacts.size, np.int64)
     rank[np.asarray(perm, np.int64)] = np.arange(contacts.size)
     return rows[np.argsort(rank[owner] * d + rows % d, kind="stable")]
