@@ -42,11 +42,11 @@ def test_the_order_keeps_each_contacts_rows_together_in_component_order(d):
     assert all(np.all(np.diff(run) > 0) for run in runs)
 
 
-def test_a_large_contact_network_is_factorised_with_less_fill_and_solves_the_same():
-    """A 40 × 40-grain lattice's 3120 contacts, all sticking (J_EE = ρ W, 6240 rows, past
-    DISSECTION_ROWS): the dissected factors hold under 60% of SuperLU's own ordering's
-    entries (measured 0.41), and the Newton step solves J dr = b to round-off."""
-    d = 2
+@pytest.mark.parametrize("d", [2, 3])
+def test_a_large_contact_network_is_factorised_with_less_fill_and_solves_the_same(d):
+    """A 40 × 40-grain lattice's 3120 contacts, all sticking (J_EE = ρ W, 6240 / 9360 rows,
+    past DISSECTION_ROWS): the dissected factors hold under 60% of SuperLU's own ordering's
+    entries (measured 0.41 / 0.35), and the Newton step solves J dr = b to round-off."""
     W = lattice_delassus(40, d)
     n = W.shape[0] // d
     assert n * d >= DISSECTION_ROWS
@@ -84,3 +84,39 @@ def test_the_contact_graph_is_ws_block_pattern_among_the_contacts_symmetric():
     ptr, adjacency = contact_graph(one_way, np.arange(3))
     np.testing.assert_array_equal(ptr, [0, 1, 3, 4])
     np.testing.assert_array_equal(adjacency, [1, 0, 2, 1])
+
+
+def test_a_factorization_whose_diagonal_pivots_fail_the_backward_error_is_redone(monkeypatch):
+    """Where the dissected factorization's first solve misses BACKWARD_ERROR (forced), J_EE
+    is factorised again in the same order with partial pivoting; where METIS fails, a
+    warning and SuperLU's own ordering; a problem with no engaged row (all contacts open)
+    past the bound is the identity."""
+    from softgrains.contact import newton_matrix, ordering
+
+    d = 2
+    W = lattice_delassus(12, d)
+    n = W.shape[0] // d
+    G = np.broadcast_to(np.eye(d), (n, d, d)).copy()
+    b = np.random.default_rng(4).normal(size=n * d)
+    monkeypatch.setattr(newton_matrix, "DISSECTION_ROWS", 0)
+    monkeypatch.setattr(newton_matrix, "BACKWARD_ERROR", -1.0)
+    solver = NewtonMatrix(W, np.full(n, 0.5))
+    dr = solver.solve(G, b)
+    np.testing.assert_allclose(0.5 * W.tocsr() @ dr, b, atol=1e-9 * np.abs(b).max())
+    assert solver.repivoted == 1 and solver.factorizations == 2
+    assert solver.base.dissected and solver.base.pivot == 1.0
+    monkeypatch.setattr(newton_matrix, "BACKWARD_ERROR", 1e-12)
+    solver = NewtonMatrix(W, np.full(n, 0.5))
+    solver.solve(G, b)
+    assert solver.repivoted == 0 and solver.base.backward_error(solver.solve(G, b), b) < 1e-15
+
+    def failing(*args, **kwargs):
+        raise RuntimeError("METIS_ERROR")
+
+    monkeypatch.setattr(ordering.pymetis, "nested_dissection", failing)
+    solver = NewtonMatrix(W, np.full(n, 0.5))
+    with pytest.warns(RuntimeWarning, match="nested dissection"):
+        dr = solver.solve(G, b)
+    np.testing.assert_allclose(0.5 * W.tocsr() @ dr, b, atol=1e-9 * np.abs(b).max())
+    assert not solver.base.dissected
+    np.testing.assert_array_equal(NewtonMatrix(W, np.full(n, 0.5)).solve(0.0 * G, b), b)

@@ -132,10 +132,14 @@ UPDATE_ROWS = 80
 # an updated solve is kept when its residual ‖J x − b‖ is within this fraction of ‖b‖,
 # else J is factorised anew (the capacitance matrix of nearly dependent rows)
 UPDATE_RESIDUAL = 1e-9
-# a dissected J_EE's pivots: the diagonal while it is at least this fraction of its
-# column's largest entry, so that the order holds (UMFPACK's symmetric strategy's 0.1; with
-# SuperLU's partial pivoting, 1.0, the 1000-grain J_EE's factors hold 9.2 M entries, not 7.0)
+# a dissected J_EE's pivots: the diagonal while it is at least this fraction of the largest
+# entry of its row of J_EE (SuperLU's column of J_EEᵀ), so that the order holds (threshold
+# pivoting's usual 0.1; with SuperLU's partial pivoting, 1.0, the 1000-grain J_EE's factors
+# hold 9.2 M entries, not 7.0 M; measured there: 6–22 of ~20 000 pivots off the diagonal)
 DIAGONAL_PIVOT = 0.1
+# the normwise backward error ‖J x − b‖∞ / (‖J‖∞ ‖x‖∞ + ‖b‖∞) a dissected factorization's
+# first solve must meet, else J_EE is factorised again with partial pivoting (1.0)
+BACKWARD_ERROR = 1e-12
 # the kept solves J0⁻¹ e_r (|E| floats each) of one factorization: at most this many, then
 # J is factorised anew
 KEPT_SOLVES = 4 * UPDATE_ROWS
@@ -147,25 +151,30 @@ class _Factorization:
     (Z = J0⁻¹ e_r is e_r on O: most rows of a large problem are open, and the kept
     columns of all N rows cost a fifth of a 1000-grain step to gather)."""
 
-    def __init__(self, W: BlockRows, G: np.ndarray, rho: np.ndarray, shift: float):
+    def __init__(self, W: BlockRows, G: np.ndarray, rho: np.ndarray, shift: float,
+                 pivot: float = DIAGONAL_PIVOT):
         self.G = G.copy()
         # E in the order J_EE is factorised: a large problem's by nested dissection
-        # (ordering.py; SuperLU then keeps it, preferring diagonal pivots), else sorted
+        # (ordering.py; SuperLU then keeps it, preferring diagonal pivots: ``pivot``),
+        # else sorted
         self.engaged = np.flatnonzero(_engaged(G))
         self.dissected = self.engaged.size >= DISSECTION_ROWS
+        self.pivot = pivot
         if self.dissected:
-            self.engaged = dissection_order(W, self.engaged)
+            order = dissection_order(W, self.engaged)
+            self.dissected = order is not None
+            self.engaged = order if order is not None else self.engaged
         self.outside, self.position = _positions(self.engaged, G.shape[0] * G.shape[1])
         self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, self.position)
         # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
         # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
-        # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26). Raises
-        # RuntimeError where J_EE is singular
+        # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26; the
+        # dissected path's diagonal pivots apply from DISSECTION_ROWS, which the D10
+        # squeezes do not reach). Raises RuntimeError where J_EE is singular
         if not self.engaged.size:
             self.lu = None
         elif self.dissected:
-            self.lu = spla.splu(self.J_ee.T, permc_spec="NATURAL",
-                                diag_pivot_thresh=DIAGONAL_PIVOT)
+            self.lu = spla.splu(self.J_ee.T, permc_spec="NATURAL", diag_pivot_thresh=pivot)
         else:
             self.lu = spla.splu(self.J_ee.T)
         # the kept solves' rows E as the columns of one array (|E|, capacity), and each row
@@ -180,6 +189,15 @@ class _Factorization:
             x[self.engaged] = self.lu.solve(b[self.engaged] - self.J_eo @ b[self.outside],
                                             trans="T")
         return x
+
+    def backward_error(self, x: np.ndarray, b: np.ndarray) -> float:
+        """‖J0 x − b‖∞ / (‖J0‖∞ ‖x‖∞ + ‖b‖∞) (the rows outside E: the identity's)."""
+        norm = max(1.0, float(np.max(abs(self.J_ee) @ np.ones(self.engaged.size)
+                                     + abs(self.J_eo) @ np.ones(self.outside.size),
+                                     initial=0.0)))
+        scale = norm * np.abs(x).max(initial=0.0) + np.abs(b).max(initial=0.0)
+        residual = np.abs(self.times(x) - b).max(initial=0.0)
+        return float(residual / scale) if scale > 0.0 else float(residual)
 
     def times(self, x: np.ndarray) -> np.ndarray:
         """J0 x."""
@@ -227,6 +245,7 @@ class NewtonMatrix:
         self.base: _Factorization | None = None
         self.factorizations = 0  # for the diagnostics and tests
         self.updates = 0
+        self.repivoted = 0  # dissected factorizations redone with partial pivoting
 
     def solve(self, G: np.ndarray, b: np.ndarray) -> np.ndarray:
         if self.base is not None:
@@ -238,7 +257,14 @@ class NewtonMatrix:
             self.base = _Factorization(self.W, G, self.rho, self.shift)
             self.factorizations += 1
             dr = self.base.solve(b)
-        except RuntimeError:
+            if (self.base.dissected and np.all(np.isfinite(dr))
+                    and not self.base.backward_error(dr, b) <= BACKWARD_ERROR):
+                # diagonal pivots that grew: the same order with partial pivoting
+                self.base = _Factorization(self.W, G, self.rho, self.shift, pivot=1.0)
+                self.factorizations += 1
+                self.repivoted += 1
+                dr = self.base.solve(b)
+        except RuntimeError:  # (SuperLU: J_EE singular)
             self.base, dr = None, None
         if dr is None or not np.all(np.isfinite(dr)):
             self.base = None

@@ -7,12 +7,16 @@ minimum degree on A + Aᵀ) fill such a network's factors as a 2D grid ordered w
 separators: on a 1000-grain dense compaction's J_EE (20 290 rows, 1.5 M nonzeros) the
 factors hold 13.7 M entries and take 0.53 s. Nested dissection of the contacts' graph
 (METIS_NodeND through pymetis) orders each separator after the two halves it splits: 7.0 M
-entries, 0.18 s with the ordering (session 56, this 2-core AMD EPYC). Below
-DISSECTION_ROWS engaged rows the ordering costs what it saves (772 rows: 3.2 ms with
-COLAMD, 2.7 + 2.5 ms), and SuperLU's own ordering is kept.
+entries, 0.18 s with the ordering (session 56, this 2-core AMD EPYC). At 772 rows (30
+grains) the ordering costs more than it saves (3.2 ms with COLAMD, 2.7 + 2.5 ms
+dissected); at 5680 rows (300 grains) it pays (67 ms, 16 + 31 ms). Below DISSECTION_ROWS
+engaged rows (between the two; the crossover itself not measured) SuperLU's own ordering
+is kept. Where METIS fails, a warning says so and SuperLU's ordering is kept too.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 import pymetis
@@ -77,12 +81,21 @@ def contact_graph(W: BlockRows, contacts: np.ndarray) -> tuple[np.ndarray, np.nd
     return graph.indptr.astype(np.int64), graph.indices.astype(np.int64)
 
 
-def dissection_order(W: BlockRows, rows: np.ndarray) -> np.ndarray:
+def dissection_order(W: BlockRows, rows: np.ndarray) -> np.ndarray | None:
     """``rows`` (rows of J: contact c's component a is row c d + a; sorted) reordered by
-    nested dissection of their contacts' graph, a contact's rows kept together."""
+    nested dissection of their contacts' graph, a contact's rows kept together; None where
+    METIS fails (with a warning)."""
     d = W.d
     contacts, owner = np.unique(rows // d, return_inverse=True)
-    perm, _ = pymetis.nested_dissection(pymetis.CSRAdjacency(*contact_graph(W, contacts)))
+    if contacts.size < 3:  # (nothing to order; METIS stops the process on an empty graph)
+        return rows
+    try:
+        perm, _ = pymetis.nested_dissection(
+            pymetis.CSRAdjacency(*contact_graph(W, contacts)))
+    except (RuntimeError, ValueError) as err:
+        warnings.warn(f"nested dissection of {contacts.size} contacts failed ({err}): "
+                      "SuperLU's own ordering instead", RuntimeWarning, stacklevel=2)
+        return None
     rank = np.empty(contacts.size, np.int64)
     rank[np.asarray(perm, np.int64)] = np.arange(contacts.size)
     return rows[np.argsort(rank[owner] * d + rows % d, kind="stable")]
