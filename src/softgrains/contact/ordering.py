@@ -9,9 +9,11 @@ factors hold 13.7 M entries and take 0.53 s. Nested dissection of the contacts' 
 (METIS_NodeND through pymetis) orders each separator after the two halves it splits: 7.0 M
 entries, 0.18 s with the ordering (session 56, this 2-core AMD EPYC). At 772 rows (30
 grains) the ordering costs more than it saves (3.2 ms with COLAMD, 2.7 + 2.5 ms
-dissected); at 5680 rows (300 grains) it pays (67 ms, 16 + 31 ms). Below DISSECTION_ROWS
-engaged rows (between the two; the crossover itself not measured) SuperLU's own ordering
-is kept. Where METIS fails, a warning says so and SuperLU's ordering is kept too.
+dissected); at 5680 rows (300 grains) it pays (67 ms, 16 + 31 ms); the 30-grain
+compaction at D/h 20 (1650–1870 rows, ~190 entries a row) is about the crossover (COLAMD
+18–25 ms, dissected 15–21 ms + an ordering of 13–20 ms on the rows' graph, less on the
+contacts'). Below DISSECTION_ROWS engaged rows SuperLU's own ordering is kept. Where METIS
+fails, a warning says so and SuperLU's ordering is kept too.
 """
 
 from __future__ import annotations
