@@ -133,9 +133,10 @@ UPDATE_ROWS = 80
 # else J is factorised anew (the capacitance matrix of nearly dependent rows)
 UPDATE_RESIDUAL = 1e-9
 # a dissected J_EE's pivots: the diagonal while it is at least this fraction of the largest
-# entry of its row of J_EE (SuperLU's column of J_EEᵀ), so that the order holds (threshold
-# pivoting's usual 0.1; with SuperLU's partial pivoting, 1.0, the 1000-grain J_EE's factors
-# hold 9.2 M entries, not 7.0 M; measured there: 6–22 of ~20 000 pivots off the diagonal)
+# entry of its column (J_EE is factorised untransposed, below), so that the order holds
+# (threshold pivoting's usual 0.1; with SuperLU's partial pivoting, 1.0, the 1000-grain
+# J_EEᵀ's factors held 9.2 M entries, not 7.0 M; ~450 of its 20 290 pivots are off the
+# diagonal)
 DIAGONAL_PIVOT = 0.1
 # the normwise backward error ‖J x − b‖∞ / (‖J‖∞ ‖x‖∞ + ‖b‖∞) a dissected factorization's
 # first solve must meet, else J_EE is factorised again with partial pivoting (1.0)
@@ -166,7 +167,8 @@ class _Factorization:
             self.engaged = order if order is not None else self.engaged
         self.outside, self.position = _positions(self.engaged, G.shape[0] * G.shape[1])
         self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, self.position)
-        # J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised without a conversion
+        # Below DISSECTION_ROWS, J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised
+        # without a conversion
         # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
         # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26; the
         # dissected path's diagonal pivots apply from DISSECTION_ROWS, which the D10

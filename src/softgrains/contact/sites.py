@@ -46,8 +46,7 @@ def subset(contacts: ContactNodes, keep: np.ndarray) -> ContactNodes:
 class Members:
     """The indices i with owner[i] == v, ascending, for any v, from one stable sort: what
     ``np.flatnonzero(owner == v)`` gives, without reading all of ``owner`` for each v (over
-    every body that read was O(bodies × contacts): at 1000 grains ~0.7 s a step in the slots'
-    set-up, session 56)."""
+    every body, O(bodies × contacts))."""
 
     def __init__(self, owner: np.ndarray) -> None:
         self.order = np.argsort(owner, kind="stable")
