@@ -1,5 +1,7 @@
 """The nested-dissection order of the contact Newton matrix's engaged rows (ordering.py)."""
 
+import warnings
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -84,6 +86,13 @@ def test_the_contact_graph_is_ws_block_pattern_among_the_contacts_symmetric():
     ptr, adjacency = contact_graph(one_way, np.arange(3))
     np.testing.assert_array_equal(ptr, [0, 1, 3, 4])
     np.testing.assert_array_equal(adjacency, [1, 0, 2, 1])
+    repeated = BlockRows(3, 1)  # a block column twice in each row (METIS must not see it)
+    repeated.start[:], repeated.end[:], repeated.built[:] = [0, 2, 4], [2, 4, 6], True
+    repeated.indices = np.array([1, 1, 0, 0, 1, 1])
+    repeated.data, repeated.size = np.ones((6, 1, 1)), 6
+    ptr, adjacency = contact_graph(repeated, np.arange(3))
+    np.testing.assert_array_equal(ptr, [0, 1, 3, 4])
+    np.testing.assert_array_equal(adjacency, [1, 0, 2, 1])
 
 
 def test_a_factorization_whose_diagonal_pivots_fail_the_backward_error_is_redone(monkeypatch):
@@ -110,6 +119,10 @@ def test_a_factorization_whose_diagonal_pivots_fail_the_backward_error_is_redone
     solver.solve(G, b)
     assert solver.repivoted == 0 and solver.base.backward_error(solver.solve(G, b), b) < 1e-15
 
+    with warnings.catch_warnings():  # (METIS itself: no graph to order, no warning)
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(NewtonMatrix(W, np.full(n, 0.5)).solve(0.0 * G, b), b)
+
     def failing(*args, **kwargs):
         raise RuntimeError("METIS_ERROR")
 
@@ -119,4 +132,3 @@ def test_a_factorization_whose_diagonal_pivots_fail_the_backward_error_is_redone
         dr = solver.solve(G, b)
     np.testing.assert_allclose(0.5 * W.tocsr() @ dr, b, atol=1e-9 * np.abs(b).max())
     assert not solver.base.dissected
-    np.testing.assert_array_equal(NewtonMatrix(W, np.full(n, 0.5)).solve(0.0 * G, b), b)

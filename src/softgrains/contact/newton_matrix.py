@@ -135,8 +135,8 @@ UPDATE_RESIDUAL = 1e-9
 # a dissected J_EE's pivots: the diagonal while it is at least this fraction of the largest
 # entry of its column (J_EE is factorised untransposed, below), so that the order holds
 # (threshold pivoting's usual 0.1; with SuperLU's partial pivoting, 1.0, the 1000-grain
-# J_EEᵀ's factors held 9.2 M entries, not 7.0 M; ~450 of its 20 290 pivots are off the
-# diagonal)
+# J_EEᵀ's factors held 9.2 M entries, not 7.0 M; untransposed at 0.1, ~450 of the 20 290
+# pivots leave the diagonal, 22 for J_EEᵀ)
 DIAGONAL_PIVOT = 0.1
 # the normwise backward error ‖J x − b‖∞ / (‖J‖∞ ‖x‖∞ + ‖b‖∞) a dissected factorization's
 # first solve must meet, else J_EE is factorised again with partial pivoting (1.0)
@@ -167,8 +167,8 @@ class _Factorization:
             self.engaged = order if order is not None else self.engaged
         self.outside, self.position = _positions(self.engaged, G.shape[0] * G.shape[1])
         self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, self.position)
-        # Below DISSECTION_ROWS, J_EEᵀ is the CSC matrix of J_EE's CSR arrays: factorised
-        # without a conversion
+        # Not dissected (below DISSECTION_ROWS, or METIS failed), J_EEᵀ is the CSC matrix of
+        # J_EE's CSR arrays: factorised without a conversion
         # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
         # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26; the
         # dissected path's diagonal pivots apply from DISSECTION_ROWS, which the D10
@@ -200,10 +200,16 @@ class _Factorization:
         return x
 
     def backward_error(self, x: np.ndarray, b: np.ndarray) -> float:
-        """‖J0 x − b‖∞ / (‖J0‖∞ ‖x‖∞ + ‖b‖∞) (the rows outside E: the identity's)."""
-        norm = max(1.0, float(np.max(abs(self.J_ee) @ np.ones(self.engaged.size)
-                                     + abs(self.J_eo) @ np.ones(self.outside.size),
-                                     initial=0.0)))
+        """‖J0 x − b‖∞ / (‖J0‖∞ ‖x‖∞ + ‖b‖∞) (the rows outside E: the identity's, so ‖J0‖∞ ≥
+        1 where there are any; taken ≥ 1 always, a lenient bound)."""
+        # (row sums from the CSR arrays: SciPy's abs() would sort a dissected J_EE's
+        # columns in place first)
+        m = self.engaged.size
+        sums = np.zeros(m)
+        for J in (self.J_ee, self.J_eo):
+            sums += np.bincount(np.repeat(np.arange(m), np.diff(J.indptr)), np.abs(J.data),
+                                minlength=m)
+        norm = max(1.0, float(sums.max(initial=0.0)))
         scale = norm * np.abs(x).max(initial=0.0) + np.abs(b).max(initial=0.0)
         residual = np.abs(self.times(x) - b).max(initial=0.0)
         return float(residual / scale) if scale > 0.0 else float(residual)
@@ -255,6 +261,9 @@ class NewtonMatrix:
         self.factorizations = 0  # for the diagnostics and tests
         self.updates = 0
         self.repivoted = 0  # dissected factorizations redone with partial pivoting
+        # the dissected factorizations' pivot threshold: partial pivoting (1.0) for the
+        # rest of the problem once a factorization needed it
+        self.pivot = DIAGONAL_PIVOT
 
     def solve(self, G: np.ndarray, b: np.ndarray) -> np.ndarray:
         if self.base is not None:
@@ -263,13 +272,15 @@ class NewtonMatrix:
                 self.updates += 1
                 return dr
         try:
-            self.base = _Factorization(self.W, G, self.rho, self.shift)
+            self.base = _Factorization(self.W, G, self.rho, self.shift, self.pivot)
             self.factorizations += 1
             dr = self.base.solve(b)
-            if (self.base.dissected and np.all(np.isfinite(dr))
-                    and not self.base.backward_error(dr, b) <= BACKWARD_ERROR):
+            if (self.base.dissected and self.pivot < 1.0
+                    and (not np.all(np.isfinite(dr))
+                         or not self.base.backward_error(dr, b) <= BACKWARD_ERROR)):
                 # diagonal pivots that grew: the same order with partial pivoting
-                self.base = _Factorization(self.W, G, self.rho, self.shift, pivot=1.0)
+                self.pivot = 1.0
+                self.base = _Factorization(self.W, G, self.rho, self.shift, self.pivot)
                 self.factorizations += 1
                 self.repivoted += 1
                 dr = self.base.solve(b)

@@ -34,11 +34,12 @@ DISSECTION_ROWS = 2000
 
 @njit(cache=True)
 def _member_pattern(start, end, indices, contacts, place):
-    """(indptr, adjacency, symmetric): block rows ``contacts`` of W's pattern (row c is
+    """(indptr, adjacency, canonical): block rows ``contacts`` of W's pattern (row c is
     ``indices[start[c]:end[c]]``) restricted to the members (``place`` ≥ 0: their index),
-    without the diagonal; whether each entry (e, j) has its mirror (j, e) (W's block
-    pattern is symmetric: c and c' touch a common body; rows sorted, as delassus builds
-    them)."""
+    without the diagonal; canonical: each row strictly increasing (sorted, no duplicate)
+    and each entry (e, j) with its mirror (j, e) — as delassus builds W's rows (c and c'
+    touch a common body). A row unsorted or repeated, or a mirror missing: not canonical
+    (METIS needs a symmetric graph without duplicate edges)."""
     m = contacts.size
     ptr = np.zeros(m + 1, np.int64)
     for e in range(m):
@@ -57,6 +58,10 @@ def _member_pattern(start, end, indices, contacts, place):
                 adjacency[k] = j
                 k += 1
     for e in range(m):
+        for q in range(ptr[e] + 1, ptr[e + 1]):
+            if adjacency[q] <= adjacency[q - 1]:
+                return ptr, adjacency, False
+    for e in range(m):
         for q in range(ptr[e], ptr[e + 1]):
             j = adjacency[q]
             at = np.searchsorted(adjacency[ptr[j]:ptr[j + 1]], e)
@@ -72,10 +77,11 @@ def contact_graph(W: BlockRows, contacts: np.ndarray) -> tuple[np.ndarray, np.nd
     W.ensure(contacts)
     place = np.full(W.n, -1, np.int64)
     place[contacts] = np.arange(contacts.size)
-    ptr, adjacency, symmetric = _member_pattern(W.start, W.end, W.indices, contacts, place)
-    if symmetric:
+    ptr, adjacency, canonical = _member_pattern(W.start, W.end, W.indices, contacts, place)
+    if canonical:
         return ptr, adjacency
-    # (a pattern given by hand, e.g. a BSR matrix in a test: made symmetric)
+    # (a pattern given by hand, e.g. a BSR matrix in a test: made symmetric, duplicates
+    # summed)
     graph = sp.csr_matrix((np.ones(adjacency.size), adjacency, ptr),
                           shape=(contacts.size, contacts.size))
     graph = (graph + graph.T).tocsr()
@@ -85,8 +91,8 @@ def contact_graph(W: BlockRows, contacts: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def dissection_order(W: BlockRows, rows: np.ndarray) -> np.ndarray | None:
     """``rows`` (rows of J: contact c's component a is row c d + a; sorted) reordered by
-    nested dissection of their contacts' graph, a contact's rows kept together; None where
-    METIS fails (with a warning)."""
+    nested dissection of their contacts' graph, a contact's rows kept together; ``rows``
+    as they are for fewer than 3 contacts; None where METIS fails (with a warning)."""
     d = W.d
     contacts, owner = np.unique(rows // d, return_inverse=True)
     if contacts.size < 3:  # (nothing to order; METIS stops the process on an empty graph)
