@@ -160,32 +160,36 @@ class _Factorization:
         # else sorted
         self.engaged = np.flatnonzero(_engaged(G))
         self.dissected = self.engaged.size >= DISSECTION_ROWS
-        self.pivot = pivot
         if self.dissected:
             order = dissection_order(W, self.engaged)
             self.dissected = order is not None
             self.engaged = order if order is not None else self.engaged
         self.outside, self.position = _positions(self.engaged, G.shape[0] * G.shape[1])
         self.J_ee, self.J_eo = _rows(W, G, rho, shift, 1.0, self.engaged, self.position)
-        # Not dissected (below DISSECTION_ROWS, or METIS failed), J_EEᵀ is the CSC matrix of
-        # J_EE's CSR arrays: factorised without a conversion
-        # (SuperLU's symmetric mode took a fifth less time but its other round-off made the
-        # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26; the
-        # dissected path's diagonal pivots apply from DISSECTION_ROWS, which the D10
-        # squeezes do not reach). Raises RuntimeError where J_EE is singular
-        # A dissected J_EE is factorised itself, converted to CSC (6 ms at 20 290 rows):
-        # SuperLU solves several right-hand sides at once only untransposed (the kept
-        # columns: 8 of them 24 against 57 ms, one 7.8 against 7.4 ms), for a factorization
-        # 15–20% slower (~450 of 20 290 pivots off the diagonal, against 22 transposed; a
-        # similarity scaling of the contacts by ρ^-½ left them: they are within contacts)
-        self.trans = "N" if self.dissected else "T"
+        self.factorise(pivot)
+
+    def factorise(self, pivot: float) -> None:
+        """J_EE = LU (SuperLU; a dissected J_EE with ``pivot`` as its diagonal pivots'
+        threshold), the kept solves forgotten. Raises RuntimeError where J_EE is singular."""
+        self.pivot = pivot
         if not self.engaged.size:
-            self.lu = None
+            self.lu, self.trans = None, "T"
         elif self.dissected:
-            self.lu = spla.splu(self.J_ee.tocsc(), permc_spec="NATURAL",
-                                diag_pivot_thresh=pivot)
+            # J_EE itself, converted to CSC (6 ms at 20 290 rows): SuperLU solves several
+            # right-hand sides at once only untransposed (the kept columns: 8 of them 24
+            # against 57 ms, one 7.8 against 7.4 ms), for a factorization 15–20% slower
+            # (~450 of 20 290 pivots off the diagonal, against 22 transposed; a similarity
+            # scaling of the contacts by ρ^-½ left them: they are within contacts)
+            self.lu, self.trans = spla.splu(self.J_ee.tocsc(), permc_spec="NATURAL",
+                                            diag_pivot_thresh=pivot), "N"
         else:
-            self.lu = spla.splu(self.J_ee.T)
+            # not dissected (below DISSECTION_ROWS, or METIS failed): J_EEᵀ is the CSC
+            # matrix of J_EE's CSR arrays, factorised without a conversion (SuperLU's
+            # symmetric mode took a fifth less time but its other round-off made the
+            # quasi-static D10 squeeze's loop stall at step 47: not kept, session 26; the
+            # dissected path's diagonal pivots apply from DISSECTION_ROWS, which the D10
+            # squeezes do not reach)
+            self.lu, self.trans = spla.splu(self.J_ee.T), "T"
         # the kept solves' rows E as the columns of one array (|E|, capacity), and each row
         # r's column in it
         self.unit_solves = np.empty((self.engaged.size, 0))
@@ -278,9 +282,9 @@ class NewtonMatrix:
             if (self.base.dissected and self.pivot < 1.0
                     and (not np.all(np.isfinite(dr))
                          or not self.base.backward_error(dr, b) <= BACKWARD_ERROR)):
-                # diagonal pivots that grew: the same order with partial pivoting
+                # diagonal pivots that grew: the same order and J_EE, partial pivoting
                 self.pivot = 1.0
-                self.base = _Factorization(self.W, G, self.rho, self.shift, self.pivot)
+                self.base.factorise(self.pivot)
                 self.factorizations += 1
                 self.repivoted += 1
                 dr = self.base.solve(b)
