@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from softgrains.integrator import banded, lapack
 from softgrains.integrator.assembly import (
     block_pattern,
     dimension,
@@ -18,6 +19,7 @@ from softgrains.integrator.assembly import (
     pair_codes,
     point_stresses,
 )
+from softgrains.integrator.banded import BandedDecoupled
 from softgrains.integrator.rotations import (
     CORRECTIONS,
     DecoupledSparse,
@@ -140,6 +142,73 @@ def test_the_sparse_decoupled_solve_is_the_dense_one(newton_matrix):
                        rtol=1e-8, atol=1e-10 * np.abs(np.linalg.solve(A_s, b)).max())
 
 
+def _banded(A, rotations, block):
+    """banded.factorize of A's A_s: (info, BandedDecoupled)."""
+    kd = banded.lower_bandwidth(A.indptr, A.indices, A.blocksize[0])
+    factors = BandedDecoupled.workspace(A.shape[0], kd, rotations.fields.shape[1])
+    info = banded.factorize(lapack.DPBTRF, lapack.DPBTRS, A.indptr, A.indices, A.data,
+                            rotations.fields, rotations.dual, block, *factors)
+    return info, BandedDecoupled(*factors)
+
+
+def test_the_band_is_the_symmetric_parts(newton_matrix):
+    """banded.symmetric_band: Ā = ½(A + Aᵀ) of the (non-symmetric) momentum tangent, all of
+    it within the lower bandwidth of A's pattern."""
+    A = newton_matrix[0]
+    kd = banded.lower_bandwidth(A.indptr, A.indices, 2)
+    full = A.toarray()
+    rows, cols = np.nonzero(full)
+    assert (rows - cols).max() <= kd <= (rows - cols).max() + 1  # (whole 2 × 2 blocks)
+    assert kd < A.shape[0] // 3  # a band: rows of the node box, not the whole body
+    ab = np.empty((kd + 1, A.shape[0]), order="F")
+    banded.symmetric_band(A.indptr, A.indices, A.data, ab)
+    symmetric = 0.5 * (full + full.T)
+    expected = np.zeros_like(ab)
+    for j in range(A.shape[0]):
+        column = symmetric[j:j + kd + 1, j]
+        expected[:column.size, j] = column
+    np.testing.assert_allclose(ab, expected, rtol=0.0, atol=1e-15 * np.abs(full).max())
+    assert np.abs(np.tril(symmetric, -kd - 1)).max() == 0.0
+
+
+@pytest.mark.parametrize("inertia", [1e-3, 1.0])
+def test_the_banded_solve_and_compliance_are_the_dense_ones(newton_matrix, inertia):
+    """A_s⁻¹ as Ā's band Cholesky and the rank-2k Woodbury update (banded.py) is the dense
+    A_s's inverse: solves of one and several right-hand sides and the compliance Bᵀ A_s⁻¹ B
+    (exactly symmetric) to ~1e-12, at a quasi-static step's inertia and a dynamic one's
+    (c_m = inertia × max|K| / m)."""
+    A, rotations, c_m, m = newton_matrix
+    A = (A + (inertia / 1e-3 - 1.0) * c_m * sp.diags(np.repeat(m, 2))).tobsr(blocksize=(2, 2))
+    A.sort_indices()
+    block = c_m * inertia / 1e-3 * rotations.inertia
+    A_s = decoupled_dense(A, rotations, block)
+    info, factorization = _banded(A, rotations, block)
+    assert info == 0
+    rng = np.random.default_rng(4)
+    b = rng.standard_normal((A.shape[0], 3))
+    exact = np.linalg.solve(A_s, b)
+    scale = np.abs(exact).max()
+    np.testing.assert_allclose(factorization.solve(b), exact, rtol=0.0, atol=1e-11 * scale)
+    np.testing.assert_allclose(factorization.solve(b[:, 0]), exact[:, 0], rtol=0.0,
+                               atol=1e-11 * scale)
+    B = np.zeros((A.shape[0], 5))
+    B[rng.choice(A.shape[0], 12, replace=False), rng.integers(0, 5, 12)] = 1.0
+    W = factorization.compliance(B, 2.0)
+    expected = 2.0 * B.T @ np.linalg.solve(A_s, B)
+    assert np.array_equal(W, W.T)
+    np.testing.assert_allclose(W, expected, rtol=0.0, atol=1e-11 * np.abs(expected).max())
+
+
+def test_an_indefinite_symmetric_part_is_refused(newton_matrix):
+    """Where Ā is not positive definite banded.factorize says so (LAPACK's info), for the
+    caller's dense A_s."""
+    A, rotations, c_m, _ = newton_matrix
+    A = (A - 2.0 * np.abs(A).max() * sp.eye(A.shape[0])).tobsr(blocksize=(2, 2))
+    A.sort_indices()
+    info, _ = _banded(A, rotations, c_m * rotations.inertia)
+    assert info > 0
+
+
 def test_defect_correction_reaches_the_exact_direction(newton_matrix):
     """From A_s's factorization, the corrections reach A⁻¹b (A not symmetric) to their
     tolerance before their cap (each gains about the step's |ΔF − I|; measured on the
@@ -217,11 +286,15 @@ def _loaded_disk_step(seed=5, mass_matrix="lumped"):
 
 
 @pytest.mark.parametrize("mass_matrix", ["lumped", "consistent"])
-def test_the_one_call_dense_direction_is_the_general_paths(mass_matrix):
-    """dense_direction.momentum_direction (the chain of kernels in one GIL-free call) gives
-    the direction, the factorization and the contacts' compliance of the general path
-    (Newton matrix, decoupled dense A_s, Cholesky, defect corrections) to round-off, and
-    newton_direction takes it for a dense body of the momentum form."""
+def test_the_one_call_dense_direction_is_the_general_paths(mass_matrix, monkeypatch):
+    """dense_direction.momentum_direction (the chain of kernels in one GIL-free call, here
+    with the band path off) gives the direction, the factorization and the contacts'
+    compliance of the general path (Newton matrix, decoupled dense A_s, Cholesky, defect
+    corrections) to round-off, and newton_direction takes it for a dense body of the
+    momentum form."""
+    import softgrains.integrator.implicit as implicit
+
+    monkeypatch.setattr(implicit, "BAND_FRACTION", 0.0)
     step = _loaded_disk_step(mass_matrix=mass_matrix)
     du = step.newton_direction(direct=True)
     assert step._exact is None  # (the one-call path leaves no BSR matrix behind)
@@ -237,6 +310,46 @@ def test_the_one_call_dense_direction_is_the_general_paths(mass_matrix):
                                atol=1e-13 * float(np.abs(lower).max()))
     _, W_general = step.contact_response(rows, True)
     np.testing.assert_allclose(W, W_general, rtol=1e-12, atol=1e-12 * float(np.abs(W).max()))
+
+
+@pytest.mark.parametrize("mass_matrix", ["lumped", "consistent"])
+def test_the_one_call_banded_direction_is_the_general_paths(mass_matrix):
+    """By default a grain's direction is dense_direction.banded_momentum_direction (A_s as
+    Ā's band and a rank-2k update, banded.py): the direction and the contacts' compliance
+    of the general path (dense A_s) to ~1e-11, and the factorization kept for the
+    compliance and the contacts' responses is the banded one."""
+    step = _loaded_disk_step(mass_matrix=mass_matrix)
+    du = step.newton_direction(direct=True)
+    assert isinstance(step.factorization(), BandedDecoupled)
+    assert step.factorization().ab.shape[0] < step.u.size // 3
+    rows = np.arange(0, step.u.shape[0], 7)
+    _, W = step.contact_response(rows, True)
+    general = step._momentum_direction(step._matrix())
+    scale = float(np.abs(general).max())
+    np.testing.assert_allclose(du, general, rtol=0.0, atol=1e-11 * scale)
+    _, W_general = step.contact_response(rows, True)
+    np.testing.assert_allclose(W, W_general, rtol=0.0, atol=1e-11 * float(np.abs(W).max()))
+
+
+def test_an_indefinite_band_leaves_the_direction_to_the_dense_kernel(monkeypatch):
+    """Where the band path finds Ā not positive definite, the dense A_s is factorised in the
+    same call of _dense_momentum_direction: the direction is the general path's."""
+    import softgrains.integrator.implicit as implicit
+    from softgrains.integrator.dense_direction import INDEFINITE
+    from softgrains.integrator.linear_solvers import DenseCholesky
+
+    calls = []
+
+    def indefinite(*args):
+        calls.append(1)
+        return INDEFINITE, 0
+
+    monkeypatch.setattr(implicit, "banded_momentum_direction", indefinite)
+    step = _loaded_disk_step()
+    du = step.newton_direction(direct=True)
+    assert calls and isinstance(step.factorization(), DenseCholesky)
+    general = step._momentum_direction(step._matrix())
+    np.testing.assert_allclose(du, general, rtol=0.0, atol=1e-12 * float(np.abs(general).max()))
 
 
 def test_the_one_call_direction_leaves_a_stiffened_rotation_to_the_general_path():

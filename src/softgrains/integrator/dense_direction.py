@@ -13,6 +13,9 @@ chain is one Numba function of the same kernels in the same order (the same arit
 :meth:`BodyStep._momentum_direction`'s path, tested to round-off), so the threads overlap
 it whole.
 
+``banded_momentum_direction`` is the same chain with A_s factorised as Ā's band and a
+rank-2k update (banded.py), the path BodyStep takes first.
+
 It covers the common case: the momentum form, a body up to DENSE_LIMIT unknowns, the
 rotations' block given (not stiffened from this iterate's stresses). Where A_s is not
 positive definite, or the iterate inverts a point, it says so and the caller takes the
@@ -26,7 +29,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from softgrains.integrator import lapack
+from softgrains.integrator import banded, lapack
 from softgrains.integrator.assembly import (
     add_block_mass,
     add_diagonal,
@@ -122,24 +125,15 @@ def _bsr_times(indptr, indices, data, x, out):
 
 
 @njit(cache=True, nogil=True)
-def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scratch, lower,
-                       du):
-    """du = A⁻¹ rhs for the momentum form's Newton matrix A at the iterate in
-    ``points.u_box`` (``points.tangent`` and ``points.momentum`` true): A assembled in
-    ``pattern.data``, A_s (its symmetric form with the
-    rotations decoupled) = L Lᵀ in ``lower`` (n × n, Fortran order; ``scratch`` n × n),
-    then the defect corrections du ← du + A_s⁻¹(rhs − A du) (at most CORRECTIONS, while
-    they shrink, until one is below CORRECTION_TOLERANCE ‖du‖). Returns (outcome,
-    corrections taken): DONE, INVERTED or INDEFINITE (du then unset; ``lower``, the
-    pattern's data and the points' Pv and Av overwritten). f^int is not gathered (the
-    general path's Newton matrix wrote f^int(u) into the body's buffer; the residual at u
-    is known)."""
+def _assemble(points, pattern, terms):
+    """A = c_m M + s_f K in ``pattern.data`` at the iterate in ``points.u_box`` (fixed dofs
+    constrained). Returns False where the iterate inverts a point (no tangent)."""
     jmin, _ = _point_stresses(
         points.nodes, points.dN, points.u_box, points.F_n, points.vol_n, points.law,
         points.lam, points.mu, points.Pv, points.Av, points.tangent, points.n_chunks,
         points.projected, points.momentum, points.dims)
     if not jmin > 0.0:
-        return INVERTED, 0
+        return False
     data = pattern.data
     _gather_tangent(pattern.ptr, pattern.entries, points.dN, points.Av, pattern.slot,
                           pattern.codes, data)
@@ -153,6 +147,25 @@ def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scr
     else:
         add_diagonal(data, pattern.diag_slot, terms.lumped)
     constrain(data, pattern.indptr, pattern.indices, terms.fixed)
+    return True
+
+
+@njit(cache=True, nogil=True)
+def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scratch, lower,
+                       du):
+    """du = A⁻¹ rhs for the momentum form's Newton matrix A at the iterate in
+    ``points.u_box`` (``points.tangent`` and ``points.momentum`` true): A assembled in
+    ``pattern.data``, A_s (its symmetric form with the
+    rotations decoupled) = L Lᵀ in ``lower`` (n × n, Fortran order; ``scratch`` n × n),
+    then the defect corrections du ← du + A_s⁻¹(rhs − A du) (at most CORRECTIONS, while
+    they shrink, until one is below CORRECTION_TOLERANCE ‖du‖). Returns (outcome,
+    corrections taken): DONE, INVERTED or INDEFINITE (du then unset; ``lower``, the
+    pattern's data and the points' Pv and Av overwritten). f^int is not gathered (the
+    general path's Newton matrix wrote f^int(u) into the body's buffer; the residual at u
+    is known)."""
+    if not _assemble(points, pattern, terms):
+        return INVERTED, 0
+    data = pattern.data
     _decoupled(pattern.indptr, pattern.indices, data, rotations.fields, rotations.dual,
                rotations.block, scratch)
     n = rhs.shape[0]
@@ -173,6 +186,43 @@ def momentum_direction(potrf, potrs, points, pattern, terms, rotations, rhs, scr
         for i in range(n):
             residual[i] = rhs[i] - residual[i]
         lapack.cholesky_solve(potrs, lower, residual)
+        size = np.sqrt(np.sum(residual * residual))
+        if size > last:
+            return DONE, taken
+        for i in range(n):
+            du[i] += residual[i]
+        if size <= CORRECTION_TOLERANCE * np.sqrt(np.sum(du * du)):
+            return DONE, taken + 1
+        last = size
+    return DONE, CORRECTIONS
+
+
+@njit(cache=True, nogil=True)
+def banded_momentum_direction(pbtrf, pbtrs, points, pattern, terms, rotations, rhs,
+                              factors, du):
+    """:func:`momentum_direction` with A_s factorised as a band matrix and a rank-2k update
+    (banded.py; ``factors``: banded.BandedDecoupled.workspace's arrays, written): the same
+    assembly and defect corrections. Returns INDEFINITE where Ā is not positive definite
+    (the caller then takes the dense A_s)."""
+    if not _assemble(points, pattern, terms):
+        return INVERTED, 0
+    data = pattern.data
+    ab, U, BU, capacitance = factors
+    if banded.factorize(pbtrf, pbtrs, pattern.indptr, pattern.indices, data,
+                        rotations.fields, rotations.dual, rotations.block, ab, U, BU,
+                        capacitance) != 0:
+        return INDEFINITE, 0
+    n = rhs.shape[0]
+    for i in range(n):
+        du[i] = rhs[i]
+    banded.solve(pbtrs, ab, U, BU, capacitance, du)
+    residual = np.empty(n)
+    last = np.inf
+    for taken in range(CORRECTIONS):
+        _bsr_times(pattern.indptr, pattern.indices, data, du, residual)
+        for i in range(n):
+            residual[i] = rhs[i] - residual[i]
+        banded.solve(pbtrs, ab, U, BU, capacitance, residual)
         size = np.sqrt(np.sum(residual * residual))
         if size > last:
             return DONE, taken

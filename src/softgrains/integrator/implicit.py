@@ -56,12 +56,15 @@ from softgrains.integrator.assembly import (
     point_stresses,
     start_strain_energy,
 )
+from softgrains.integrator.banded import BAND_FRACTION, BandedDecoupled, lower_bandwidth
 from softgrains.integrator.dense_direction import (
     DONE,
+    INDEFINITE,
     NewtonPattern,
     PointTangents,
     Rotations,
     StepTerms,
+    banded_momentum_direction,
     momentum_direction,
 )
 from softgrains.integrator.linear_solvers import (
@@ -178,7 +181,7 @@ class ImpulseResponse:
     def positive_definite(self) -> bool:
         """Whether A is known to be positive definite (factorised by Cholesky; SuperLU's
         factorization does not tell)."""
-        return isinstance(self.factorization, DenseCholesky)
+        return isinstance(self.factorization, (DenseCholesky, BandedDecoupled))
 
     def move(self, q: np.ndarray) -> np.ndarray:
         """X q (q: one impulse per site component)."""
@@ -339,6 +342,7 @@ class BodyStep:
         self.indptr, self.indices, self.slot, self.diag_slot = block_pattern(
             active_row, self.box.shape, stepper.s)
         self.ptr, self.entries = node_point_map(nodes, active_row, n_act)
+        self._bandwidth: int | None = None  # the Newton matrix's lower bandwidth (banded.py)
         self.n_chunks = CHUNKS_PER_THREAD * (threads or numba.get_num_threads())
         self.Pv = np.empty((nodes.shape[0], d, d))
         self.Av = np.empty((nodes.shape[0], d, d, d, d))
@@ -615,7 +619,7 @@ class BodyStep:
             H = sites.tocsr()
             site_columns(dofs, H.indptr, H.indices, H.data, free, E)
         factorization = self.factorization()
-        if isinstance(factorization, DenseCholesky):
+        if isinstance(factorization, (DenseCholesky, BandedDecoupled)):
             W = factorization.compliance(E, kappa * w)
             return ImpulseResponse(w, factorization, E, free), W
         X = factorization.solve(E) * w
@@ -831,10 +835,13 @@ class BodyStep:
 
     def _dense_momentum_direction(self) -> np.ndarray | None:
         """:meth:`_momentum_direction`'s du for a body up to DENSE_LIMIT unknowns whose
-        rotation is not stiffened, in one call that releases the GIL
-        (dense_direction.momentum_direction: the same kernels in the same order); None
-        where it does not apply, A_s is not positive definite or the iterate inverts a
-        point (the general path then)."""
+        rotation is not stiffened, in one call that releases the GIL: A_s factorised as
+        Ā's band and a rank-2k update where the band is narrow (BAND_FRACTION) and Ā
+        positive definite (dense_direction.banded_momentum_direction, banded.py: 0.43
+        against 0.62 ms a grain of the dense compaction at D/h 10), else dense
+        (dense_direction.momentum_direction: the general path's kernels in the same
+        order); None where it does not apply, A_s is not positive definite or the iterate
+        inverts a point (the general path then)."""
         n = self.u.size
         if self._stiff_rotation or n > DENSE_LIMIT or not self._in_one_call():
             return None
@@ -848,16 +855,29 @@ class BodyStep:
                           (self.m * self.c_m).ravel(),
                           self.m_blocks if self.consistent else np.empty(0),
                           self.fixed.ravel())
-        lower, du = np.empty((n, n), order="F"), np.empty(n)
-        outcome, corrections = momentum_direction(
-            lapack.DPOTRF, lapack.DPOTRS, points, pattern, terms,
-            Rotations(rotations.fields, rotations.dual, block), -self.r.ravel(),
-            np.empty((n, n)), lower, du)
+        rotation_terms = Rotations(rotations.fields, rotations.dual, block)
+        du, outcome = np.empty(n), INDEFINITE
+        if self._bandwidth is None:
+            self._bandwidth = lower_bandwidth(self.indptr, self.indices, self.d)
+        kd = self._bandwidth
+        if kd + 1 <= BAND_FRACTION * n:
+            # A_s as Ā's band and a rank-2k update (banded.py), where Ā is positive definite
+            factors = BandedDecoupled.workspace(n, kd, rotations.fields.shape[1])
+            outcome, corrections = banded_momentum_direction(
+                lapack.DPBTRF, lapack.DPBTRS, points, pattern, terms, rotation_terms,
+                -self.r.ravel(), factors, du)
+            factorization = BandedDecoupled(*factors)
+        if outcome == INDEFINITE:
+            lower = np.empty((n, n), order="F")
+            outcome, corrections = momentum_direction(
+                lapack.DPOTRF, lapack.DPOTRS, points, pattern, terms, rotation_terms,
+                -self.r.ravel(), np.empty((n, n)), lower, du)
+            factorization = DenseCholesky(lower)
         if outcome != DONE:
             return None
         self._A_at, self._A, self._exact = self.u, None, None
         self._rotation_block = block
-        self._lu = DenseCholesky(lower)
+        self._lu = factorization
         res = self.result
         res.linear_method = "direct"
         res.linear_iterations += 1 + corrections

@@ -41,6 +41,13 @@ DSYRK = _routine("blas", "dsyrk", 10)
 DGETRF = _routine("lapack", "dgetrf", 6)
 # (trans, n, nrhs, a, lda, ipiv, b, ldb, info)
 DGETRS = _routine("lapack", "dgetrs", 9)
+# band storage (ab[i − j, j] = a_ij for j ≤ i ≤ j + kd, (kd + 1) × n): (uplo, n, kd, ab,
+# ldab, info)
+DPBTRF = _routine("lapack", "dpbtrf", 6)
+# (uplo, n, kd, nrhs, ab, ldab, b, ldb, info)
+DPBTRS = _routine("lapack", "dpbtrs", 9)
+# (uplo, trans, diag, n, kd, nrhs, ab, ldab, b, ldb, info)
+DTBTRS = _routine("lapack", "dtbtrs", 11)
 
 _LOWER, _LEFT, _NO, _NOT_UNIT, _TRANSPOSED = ord("L"), ord("L"), ord("N"), ord("N"), ord("T")
 
@@ -133,3 +140,49 @@ def gram(syrk, y, alpha, out):
     for j in range(k):  # out is Fortran-ordered: out[i, j], i ≥ j, is the lower triangle
         for i in range(j + 1, k):
             out[j, i] = out[i, j]
+
+
+@njit(cache=True, nogil=True)
+def band_cholesky(pbtrf, ab):
+    """ab ← L in the same band storage, for the symmetric band matrix A = L Lᵀ given by its
+    lower band ab ((kd + 1) × n, Fortran order: ab[i − j, j] = a_ij, j ≤ i ≤ j + kd).
+    Returns LAPACK's info (> 0: not positive definite), or −1 where a pivot is not
+    finite."""
+    kd, n = ab.shape[0] - 1, ab.shape[1]
+    chars = np.array([_LOWER], np.uint8)
+    ints = np.array([n, kd, max(kd + 1, 1), 0], np.int32)  # n, kd, ldab, info
+    pbtrf(chars.ctypes.data, ints[0:1].ctypes.data, ints[1:2].ctypes.data, ab.ctypes.data,
+          ints[2:3].ctypes.data, ints[3:4].ctypes.data)
+    if ints[3] != 0:
+        return ints[3]
+    for j in range(n):
+        if not np.isfinite(ab[0, j]):
+            return -1
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def band_cholesky_solve(pbtrs, ab, b):
+    """b ← A⁻¹ b with A = L Lᵀ (``ab``: :func:`band_cholesky`'s); b a vector or a
+    Fortran-ordered matrix. Returns LAPACK's info."""
+    kd, n = ab.shape[0] - 1, ab.shape[1]
+    chars = np.array([_LOWER], np.uint8)
+    ints = np.array([n, kd, _columns(b), kd + 1, max(n, 1), 0], np.int32)
+    pbtrs(chars.ctypes.data, ints[0:1].ctypes.data, ints[1:2].ctypes.data,
+          ints[2:3].ctypes.data, ab.ctypes.data, ints[3:4].ctypes.data, b.ctypes.data,
+          ints[4:5].ctypes.data, ints[5:6].ctypes.data)
+    return ints[5]
+
+
+@njit(cache=True, nogil=True)
+def band_lower_solve(tbtrs, ab, b):
+    """b ← L⁻¹ b (``ab``: :func:`band_cholesky`'s L; b Fortran-ordered, n × k). Returns
+    LAPACK's info."""
+    kd, n = ab.shape[0] - 1, ab.shape[1]
+    chars = np.array([_LOWER, _NO, _NOT_UNIT], np.uint8)
+    ints = np.array([n, kd, _columns(b), kd + 1, max(n, 1), 0], np.int32)
+    tbtrs(chars[0:1].ctypes.data, chars[1:2].ctypes.data, chars[2:3].ctypes.data,
+          ints[0:1].ctypes.data, ints[1:2].ctypes.data, ints[2:3].ctypes.data,
+          ab.ctypes.data, ints[3:4].ctypes.data, b.ctypes.data, ints[4:5].ctypes.data,
+          ints[5:6].ctypes.data)
+    return ints[5]

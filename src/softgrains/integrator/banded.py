@@ -1,0 +1,201 @@
+"""A_s, the momentum form's Newton matrix with the rigid rotations decoupled
+(rotations.py), factorised as a band matrix and a rank-2k update (issue 14).
+
+    A_s = PᵀĀP + Q B Qᵀ = Ā + U C Uᵀ,   U = [Q, ĀR],   C = [[RᵀĀR + B, −I], [−I, 0]]
+
+(Ā = ½(A + Aᵀ), P = I − R Qᵀ; R the k rigid rotations, B their block; k = 1 in 2D, 3 in
+3D). Ā has the band of a body's node box: a grain's nodes are numbered row by row, and the
+B-spline stencils couple nodes at most two rows apart, so its lower bandwidth kd is about
+two rows of the box (55 of 264 unknowns for a grain at D/h 10, ~110 of 1000 at D/h 20),
+while A_s's rank-2k part fills the whole matrix. With Ā = L Lᵀ (LAPACK's band Cholesky,
+n kd² work against n³/3 for A_s dense) and the Woodbury identity
+
+    A_s⁻¹ = Ā⁻¹ − Ā⁻¹U (C⁻¹ + UᵀĀ⁻¹U)⁻¹ UᵀĀ⁻¹,   C⁻¹ = [[0, −I], [−I, −(RᵀĀR + B)]]
+
+a solve is a band solve (n kd against n² work) plus 2k columns. Ā positive definite makes
+A_s positive definite (xᵀA_s x = (Px)ᵀĀ(Px) + (Qᵀx)ᵀB(Qᵀx), zero only for x = 0 since
+PR = 0 and QᵀR = I); where Ā is not, the band Cholesky says so and the caller factorises
+A_s dense (its Cholesky or LU). Solves agree with the dense Cholesky of A_s to ~1e-12
+(relative, the dense compaction's grains; tests/integrator/test_banded.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from softgrains.integrator import lapack
+
+# the band path is taken where the band (kd + 1 rows) is at most this fraction of the
+# unknowns: its factorization's work n kd² against n³/3, with its 2k extra solves (not
+# tuned: measured at 0.21 (D/h 10, 0.43 against 0.62 ms a direction) and ~0.1 (D/h 20))
+BAND_FRACTION = 0.35
+
+
+def lower_bandwidth(indptr: np.ndarray, indices: np.ndarray, d: int) -> int:
+    """kd of a BSR pattern of d × d blocks: the largest i − j of an entry (i, j) with
+    i ≥ j, counting whole blocks."""
+    rows = np.repeat(np.arange(indptr.size - 1), np.diff(indptr))
+    return int(np.abs(rows - indices).max(initial=0)) * d + d - 1
+
+
+@njit(cache=True, nogil=True)
+def symmetric_band(indptr, indices, data, ab):
+    """ab ← the lower band of Ā = ½(A + Aᵀ) (ab[i − j, j] = Ā_ij, (kd + 1) × n) from the BSR
+    matrix A (indptr, indices, data); kd must hold A's pattern (:func:`lower_bandwidth`)."""
+    d = data.shape[1]
+    ab[:, :] = 0.0
+    for r in range(indptr.shape[0] - 1):
+        for q in range(indptr[r], indptr[r + 1]):
+            c = indices[q]
+            for i in range(d):
+                for j in range(d):
+                    row, col = r * d + i, c * d + j
+                    half = 0.5 * data[q, i, j]
+                    if row >= col:
+                        ab[row - col, col] += half
+                    if col >= row:
+                        ab[col - row, row] += half
+
+
+@njit(cache=True, nogil=True)
+def _symmetric_times(indptr, indices, data, X, out):
+    """out = Ā X (Ā = ½(A + Aᵀ), A the BSR matrix; X and out n × m)."""
+    d = data.shape[1]
+    out[:, :] = 0.0
+    for r in range(indptr.shape[0] - 1):
+        for q in range(indptr[r], indptr[r + 1]):
+            c = indices[q]
+            for i in range(d):
+                for j in range(d):
+                    row, col = r * d + i, c * d + j
+                    half = 0.5 * data[q, i, j]
+                    for a in range(X.shape[1]):
+                        out[row, a] += half * X[col, a]
+                        out[col, a] += half * X[row, a]
+
+
+@njit(cache=True, nogil=True)
+def factorize(pbtrf, pbtrs, indptr, indices, data, R, Q, block, ab, U, BU, capacitance):
+    """A_s of the module docstring from the BSR A: ab ← L (Ā = L Lᵀ, band storage), U =
+    [Q, ĀR], BU = Ā⁻¹U, ``capacitance`` = (C⁻¹ + UᵀĀ⁻¹U)⁻¹ (U, BU n × 2k in Fortran order,
+    ``block`` B k × k). Returns the band Cholesky's info (≠ 0: Ā is not positive definite;
+    the rest is then unset)."""
+    n, k = R.shape
+    symmetric_band(indptr, indices, data, ab)
+    info = lapack.band_cholesky(pbtrf, ab)
+    if info != 0:
+        return info
+    AR = np.empty((n, k))
+    _symmetric_times(indptr, indices, data, R, AR)
+    for i in range(n):
+        for a in range(k):
+            U[i, a] = Q[i, a]
+            U[i, k + a] = AR[i, a]
+            BU[i, a] = Q[i, a]
+            BU[i, k + a] = AR[i, a]
+    lapack.band_cholesky_solve(pbtrs, ab, BU)
+    middle = np.zeros((2 * k, 2 * k))  # C⁻¹ + UᵀĀ⁻¹U
+    for a in range(k):
+        middle[a, k + a] -= 1.0
+        middle[k + a, a] -= 1.0
+        for b in range(k):
+            acc = block[a, b]
+            for i in range(n):
+                acc += R[i, a] * AR[i, b]
+            middle[k + a, k + b] -= acc
+    for a in range(2 * k):
+        for b in range(2 * k):
+            acc = 0.0
+            for i in range(n):
+                acc += U[i, a] * BU[i, b]
+            middle[a, b] += acc
+    inverse = np.linalg.inv(middle)
+    for a in range(2 * k):  # (symmetric in exact arithmetic: made so)
+        for b in range(2 * k):
+            capacitance[a, b] = 0.5 * (inverse[a, b] + inverse[b, a])
+    return 0
+
+
+@njit(cache=True, nogil=True)
+def solve(pbtrs, ab, U, BU, capacitance, x):
+    """x ← A_s⁻¹ x (x a vector): the band solve, then the Woodbury correction."""
+    lapack.band_cholesky_solve(pbtrs, ab, x)
+    m = U.shape[1]
+    t = np.zeros(m)
+    for a in range(m):
+        acc = 0.0
+        for i in range(x.shape[0]):
+            acc += U[i, a] * x[i]
+        t[a] = acc
+    s = capacitance @ t
+    for i in range(x.shape[0]):
+        acc = 0.0
+        for a in range(m):
+            acc += BU[i, a] * s[a]
+        x[i] -= acc
+
+
+@njit(cache=True, nogil=True)
+def _solve_columns(pbtrs, ab, U, BU, capacitance, X):
+    """X ← A_s⁻¹ X (X n × m, Fortran order)."""
+    lapack.band_cholesky_solve(pbtrs, ab, X)
+    S = capacitance @ (U.T @ X)
+    for j in range(X.shape[1]):
+        for i in range(X.shape[0]):
+            acc = 0.0
+            for a in range(U.shape[1]):
+                acc += BU[i, a] * S[a, j]
+            X[i, j] -= acc
+
+
+@njit(cache=True, nogil=True)
+def _compliance(tbtrs, syrk, ab, BU, capacitance, B, alpha, Y, out):
+    """out ← α BᵀA_s⁻¹B = α((L⁻¹B)ᵀ(L⁻¹B) − V cap Vᵀ), V = BᵀĀ⁻¹U (B, Y and out Fortran
+    order), exactly symmetric."""
+    for j in range(B.shape[1]):
+        for i in range(B.shape[0]):
+            Y[i, j] = B[i, j]
+    lapack.band_lower_solve(tbtrs, ab, Y)
+    lapack.gram(syrk, Y, alpha, out)
+    V = B.T @ BU
+    correction = V @ capacitance @ V.T
+    m = B.shape[1]
+    for j in range(m):
+        for i in range(j, m):
+            value = alpha * 0.5 * (correction[i, j] + correction[j, i])
+            out[i, j] -= value
+            if i != j:
+                out[j, i] = out[i, j]
+
+
+class BandedDecoupled:
+    """The factorization of A_s of the module docstring, with DenseCholesky's interface
+    (``solve``, ``compliance``); A_s is positive definite."""
+
+    def __init__(self, ab: np.ndarray, U: np.ndarray, BU: np.ndarray,
+                 capacitance: np.ndarray) -> None:
+        self.ab, self.U, self.BU, self.capacitance = ab, U, BU, capacitance
+
+    @classmethod
+    def workspace(cls, n: int, kd: int, k: int) -> tuple[np.ndarray, ...]:
+        """Arrays for :func:`factorize`: ab, U, BU, capacitance."""
+        return (np.empty((kd + 1, n), order="F"), np.empty((n, 2 * k), order="F"),
+                np.empty((n, 2 * k), order="F"), np.empty((2 * k, 2 * k)))
+
+    def solve(self, b: np.ndarray) -> np.ndarray:
+        x = np.array(b, float, order="F")
+        if x.ndim == 1:
+            solve(lapack.DPBTRS, self.ab, self.U, self.BU, self.capacitance, x)
+        else:
+            _solve_columns(lapack.DPBTRS, self.ab, self.U, self.BU, self.capacitance, x)
+        return x
+
+    def compliance(self, B: np.ndarray, alpha: float = 1.0) -> np.ndarray:
+        """α Bᵀ A_s⁻¹ B (B a matrix), exactly symmetric (its band part by BLAS syrk)."""
+        B = np.asfortranarray(B, float)
+        Y = np.empty(B.shape, order="F")
+        out = np.empty((B.shape[1], B.shape[1]), order="F")
+        _compliance(lapack.DTBTRS, lapack.DSYRK, self.ab, self.BU, self.capacitance, B,
+                    float(alpha), Y, out)
+        return out
