@@ -389,15 +389,23 @@ def test_the_rigid_modes_carry_a_free_disks_compliance_at_a_quasi_static_step(fo
     assert not held.rigid_modes(np.arange(5)).any()
 
 
-def test_the_compliance_by_cholesky_is_the_one_by_lu():
-    """Where the Newton matrix A is positive definite it is factorised by Cholesky and the
-    compliance formed as W = κ w (L⁻¹G)ᵀ(L⁻¹G), X applied by solves: the same W and X q as
-    the LU's W = κ w Gᵀ A⁻¹ G, X = w A⁻¹ G (to round-off), W symmetric to the bit and
-    positive semidefinite; fixed dofs take no impulse."""
+@pytest.mark.parametrize("band", [False, True])
+def test_the_compliance_by_cholesky_is_the_one_by_lu(band, monkeypatch):
+    """Where the Newton matrix A is positive definite it is factorised by Cholesky (of A
+    dense, or of Ā's band with a rank-2k update: integrator/banded.py, the default for a
+    grain) and the compliance formed as W = κ w (L⁻¹G)ᵀ(L⁻¹G) (less the update's term),
+    X applied by solves: the same W and X q as the LU's W = κ w Gᵀ A⁻¹ G, X = w A⁻¹ G (to
+    round-off), W symmetric to the bit and positive semidefinite; fixed dofs take no
+    impulse."""
     import scipy.sparse as sp
 
+    import softgrains.integrator.implicit as implicit
     from softgrains.integrator import linear_solvers
+    from softgrains.integrator.banded import BandedDecoupled
+    from softgrains.integrator.rotations import decoupled_dense
 
+    if not band:
+        monkeypatch.setattr(implicit, "BAND_FRACTION", 0.0)
     step = _disk_step()
     step.fixed[3] = True  # a fixed (Dirichlet) row among the contact rows
     rng = np.random.default_rng(11)
@@ -405,9 +413,13 @@ def test_the_compliance_by_cholesky_is_the_one_by_lu():
     H = sp.csr_matrix(rng.standard_normal((10, 24)) * (rng.random((10, 24)) < 0.3))
     cholesky, W = step.contact_response(rows, True, H)
     assert cholesky.positive_definite and cholesky.formed is None
+    assert isinstance(cholesky.factorization,
+                      BandedDecoupled if band else linear_solvers.DenseCholesky)
     np.testing.assert_array_equal(W, W.T)
     assert np.linalg.eigvalsh(W).min() >= -1e-12 * np.abs(W).max()
-    step._lu = linear_solvers.DenseLU(step._A)  # the same A by LU
+    # the same A (its decoupled symmetric form, rotations.py) by LU
+    step._lu = linear_solvers.DenseLU(decoupled_dense(step._exact, step._rigid_rotations(),
+                                                      step._rotation_block))
     lu, W_lu = step.contact_response(rows, True, H)
     assert lu.formed is not None
     np.testing.assert_allclose(W, W_lu, atol=1e-12 * np.abs(W_lu).max())

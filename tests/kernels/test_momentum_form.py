@@ -20,6 +20,7 @@ from softgrains.integrator.assembly import (
     point_stresses,
 )
 from softgrains.integrator.banded import BandedDecoupled
+from softgrains.integrator.linear_solvers import DenseCholesky
 from softgrains.integrator.rotations import (
     CORRECTIONS,
     DecoupledSparse,
@@ -261,7 +262,7 @@ def test_the_default_stress_form_is_the_momentum_form_at_theta_one(settings, exp
     assert step.momentum_form == expected
 
 
-def _loaded_disk_step(seed=5, mass_matrix="lumped"):
+def _loaded_disk_step(seed=5, mass_matrix="lumped", cell_size=0.1):
     """A BodyStep of the momentum form for a neo-Hookean disk under gravity whose points
     start pre-strained by random F^n (a loaded grain, as in a dense packing)."""
     from softgrains import Simulation, load_case
@@ -269,7 +270,7 @@ def _loaded_disk_step(seed=5, mass_matrix="lumped"):
 
     sim = Simulation(load_case({
         "simulation": {"dt": 1e-3, "steps": 1, "mass_matrix": mass_matrix},
-        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
+        "grid": {"cell_size": cell_size, "origin": [0.0, 0.0], "size": [2.0, 2.0]},
         "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
         "bodies": [{"name": "disk", "shape": "disk", "center": [1.0, 1.0], "radius": 0.5,
                     "material": "gel"}],
@@ -313,22 +314,52 @@ def test_the_one_call_dense_direction_is_the_general_paths(mass_matrix, monkeypa
 
 
 @pytest.mark.parametrize("mass_matrix", ["lumped", "consistent"])
-def test_the_one_call_banded_direction_is_the_general_paths(mass_matrix):
+def test_the_one_call_banded_direction_is_the_general_paths(mass_matrix, monkeypatch):
     """By default a grain's direction is dense_direction.banded_momentum_direction (A_s as
     Ā's band and a rank-2k update, banded.py): the direction and the contacts' compliance
-    of the general path (dense A_s) to ~1e-11, and the factorization kept for the
+    of the general path with the dense A_s to ~1e-11, and the factorization kept for the
     compliance and the contacts' responses is the banded one."""
+    import softgrains.integrator.implicit as implicit
+
     step = _loaded_disk_step(mass_matrix=mass_matrix)
     du = step.newton_direction(direct=True)
+    assert step._exact is None  # (the one-call path)
     assert isinstance(step.factorization(), BandedDecoupled)
     assert step.factorization().ab.shape[0] < step.u.size // 3
     rows = np.arange(0, step.u.shape[0], 7)
     _, W = step.contact_response(rows, True)
+    monkeypatch.setattr(implicit, "BAND_FRACTION", 0.0)
     general = step._momentum_direction(step._matrix())
+    assert isinstance(step.factorization(), DenseCholesky)
     scale = float(np.abs(general).max())
     np.testing.assert_allclose(du, general, rtol=0.0, atol=1e-11 * scale)
     _, W_general = step.contact_response(rows, True)
     np.testing.assert_allclose(W, W_general, rtol=0.0, atol=1e-11 * float(np.abs(W).max()))
+
+
+@pytest.mark.parametrize("stiffened", [False, True])
+def test_a_large_body_takes_the_band_on_the_general_path(stiffened, monkeypatch):
+    """Above DENSE_LIMIT (a disk at D/h 40, 2946 unknowns) the general path factorises A_s
+    as Ā's band and its rank-2k update, not by SuperLU (DecoupledSparse): the same
+    direction (defect-corrected; with a stiffened rotation A_s's own) and compliance to
+    ~1e-10."""
+    import softgrains.integrator.implicit as implicit
+    from softgrains.integrator.linear_solvers import DENSE_LIMIT
+
+    step = _loaded_disk_step(cell_size=0.025)
+    assert step.u.size > DENSE_LIMIT
+    if stiffened:
+        assert step.stiffen_rotation()
+    du = step.newton_direction(direct=True)
+    assert isinstance(step.factorization(), BandedDecoupled)
+    rows = np.arange(0, step.u.shape[0], 37)
+    _, W = step.contact_response(rows, True)
+    monkeypatch.setattr(implicit, "BAND_FRACTION", 0.0)
+    general = step._momentum_direction(step._matrix())
+    assert isinstance(step.factorization(), DecoupledSparse)
+    np.testing.assert_allclose(du, general, rtol=0.0, atol=1e-10 * float(np.abs(general).max()))
+    _, W_sparse = step.contact_response(rows, True)
+    np.testing.assert_allclose(W, W_sparse, rtol=0.0, atol=1e-10 * float(np.abs(W).max()))
 
 
 def test_an_indefinite_band_leaves_the_direction_to_the_dense_kernel(monkeypatch):
@@ -336,7 +367,6 @@ def test_an_indefinite_band_leaves_the_direction_to_the_dense_kernel(monkeypatch
     same call of _dense_momentum_direction: the direction is the general path's."""
     import softgrains.integrator.implicit as implicit
     from softgrains.integrator.dense_direction import INDEFINITE
-    from softgrains.integrator.linear_solvers import DenseCholesky
 
     calls = []
 

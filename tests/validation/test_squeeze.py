@@ -324,6 +324,11 @@ def test_the_momentum_form_squeezes_between_frictional_plates_without_a_retried_
     machine of session 50, 2 solves failed and no step retried on session 51's (round-off
     decides which). Since session 51 the Tresca problems' interior point (2D) solves
     those too: the retry is checked with it held off (as in 3D), and then without either.
+    With the retry alone no step is retried, but how many solves fail is round-off's
+    choice (session 57, with E × (1 + ε), ε = 0, ±1e-12, ±1e-10: 0, 0, 2, 4 and 8 failed
+    solves and one step retried at −1e-10 with the dense factorization of A_s; 2 failed,
+    none retried, at every ε with its band factorization, banded.py); without either
+    1 step retried and ~20 solves failed at each ε.
     At D/h 10 a step was retried until session 52: the coupled loop's rotation, not a
     solve (test_the_stiffened_rotation_converges_on_the_coarse_frictional_squeeze)."""
     from softgrains.contact import solvers
@@ -343,10 +348,12 @@ def test_the_momentum_form_squeezes_between_frictional_plates_without_a_retried_
     assert retried == 0 and failed == 0 and mean <= 4.0 and most <= 8
     monkeypatch.setattr(solvers, "_tresca_interior_applies",
                         lambda problem, options: False)
-    assert run()[0::3] == (0, 0)  # the retry alone
+    retried_alone, _, _, failed_alone = run()
+    assert retried_alone == 0  # the retry alone
     monkeypatch.setattr(solvers, "_rigid_dominated", lambda problem: False)
     retried, _, _, failed = run()
-    assert retried > 0 or failed > 0  # what the retry on the deformation scale changes
+    # what the retry on the deformation scale changes
+    assert retried > retried_alone and failed > failed_alone
 
 
 @pytest.mark.parametrize("travel", [0.1, 0.05])

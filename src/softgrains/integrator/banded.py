@@ -169,6 +169,16 @@ def _compliance(tbtrs, syrk, ab, BU, capacitance, B, alpha, Y, out):
                 out[j, i] = out[i, j]
 
 
+def decoupled(A, rotations, block: np.ndarray, kd: int) -> BandedDecoupled | None:
+    """A_s of the BSR Newton matrix A (rotations.RigidRotations ``rotations``, their block
+    B) factorised as above, or None where Ā is not positive definite."""
+    factors = BandedDecoupled.workspace(A.shape[0], kd, rotations.fields.shape[1])
+    if factorize(lapack.DPBTRF, lapack.DPBTRS, A.indptr, A.indices, A.data,
+                 rotations.fields, rotations.dual, np.asarray(block, float), *factors) != 0:
+        return None
+    return BandedDecoupled(*factors)
+
+
 class BandedDecoupled:
     """The factorization of A_s of the module docstring, with DenseCholesky's interface
     (``solve``, ``compliance``); A_s is positive definite."""

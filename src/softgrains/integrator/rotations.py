@@ -170,8 +170,8 @@ def rotation_stiffness(rotations: RigidRotations, stresses: np.ndarray, c_m: flo
 def symmetric_factorization(A_s):
     """Cholesky of the dense symmetric A_s (a copy), or its LU where it is not positive
     definite (its negative modes are then a material's own: the rotations are not); a
-    :class:`DecoupledSparse` is its own factorization."""
-    if isinstance(A_s, DecoupledSparse):
+    :class:`DecoupledSparse` or a banded.BandedDecoupled is its own factorization."""
+    if not isinstance(A_s, np.ndarray):
         return A_s
     cholesky = DenseCholesky.attempt(np.array(A_s, order="F"))
     return cholesky if cholesky is not None else DenseLU(A_s)
