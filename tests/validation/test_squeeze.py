@@ -324,11 +324,13 @@ def test_the_momentum_form_squeezes_between_frictional_plates_without_a_retried_
     machine of session 50, 2 solves failed and no step retried on session 51's (round-off
     decides which). Since session 51 the Tresca problems' interior point (2D) solves
     those too: the retry is checked with it held off (as in 3D), and then without either.
-    With the retry alone no step is retried, but how many solves fail is round-off's
-    choice (session 57, with E × (1 + ε), ε = 0, ±1e-12, ±1e-10: 0, 0, 2, 4 and 8 failed
-    solves and one step retried at −1e-10 with the dense factorization of A_s; 2 failed,
-    none retried, at every ε with its band factorization, banded.py); without either
-    1 step retried and ~20 solves failed at each ε.
+    With the retry alone, how many solves fail and whether a step is retried is
+    round-off's choice; what holds is that it fails fewer solves and retries no more
+    steps than without it (session 57, E × (1 + ε), ε = 0, ±1e-12, ±1e-10, the band
+    factorization of A_s, banded.py: retry alone 1/12, 0/0, 0/2, 0/2, 0/2 steps retried /
+    solves failed, neither 1/19, 0/3, 1/13, 1/13, 1/13; before it, with A_s dense, the
+    retry alone 0/0, 0/0, 0/2, 0/4, 1/8; the default, with the interior point, 0/0 at
+    every ε).
     At D/h 10 a step was retried until session 52: the coupled loop's rotation, not a
     solve (test_the_stiffened_rotation_converges_on_the_coarse_frictional_squeeze)."""
     from softgrains.contact import solvers
@@ -348,12 +350,11 @@ def test_the_momentum_form_squeezes_between_frictional_plates_without_a_retried_
     assert retried == 0 and failed == 0 and mean <= 4.0 and most <= 8
     monkeypatch.setattr(solvers, "_tresca_interior_applies",
                         lambda problem, options: False)
-    retried_alone, _, _, failed_alone = run()
-    assert retried_alone == 0  # the retry alone
+    retried_alone, _, _, failed_alone = run()  # the retry alone
     monkeypatch.setattr(solvers, "_rigid_dominated", lambda problem: False)
     retried, _, _, failed = run()
     # what the retry on the deformation scale changes
-    assert retried > retried_alone and failed > failed_alone
+    assert retried_alone <= retried and failed_alone < failed
 
 
 @pytest.mark.parametrize("travel", [0.1, 0.05])

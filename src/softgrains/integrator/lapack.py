@@ -46,8 +46,6 @@ DGETRS = _routine("lapack", "dgetrs", 9)
 DPBTRF = _routine("lapack", "dpbtrf", 6)
 # (uplo, n, kd, nrhs, ab, ldab, b, ldb, info)
 DPBTRS = _routine("lapack", "dpbtrs", 9)
-# (uplo, trans, diag, n, kd, nrhs, ab, ldab, b, ldb, info)
-DTBTRS = _routine("lapack", "dtbtrs", 11)
 
 _LOWER, _LEFT, _NO, _NOT_UNIT, _TRANSPOSED = ord("L"), ord("L"), ord("N"), ord("N"), ord("T")
 
@@ -175,14 +173,16 @@ def band_cholesky_solve(pbtrs, ab, b):
 
 
 @njit(cache=True, nogil=True)
-def band_lower_solve(tbtrs, ab, b):
-    """b ← L⁻¹ b (``ab``: :func:`band_cholesky`'s L; b Fortran-ordered, n × k). Returns
-    LAPACK's info."""
-    kd, n = ab.shape[0] - 1, ab.shape[1]
-    chars = np.array([_LOWER, _NO, _NOT_UNIT], np.uint8)
-    ints = np.array([n, kd, _columns(b), kd + 1, max(n, 1), 0], np.int32)
-    tbtrs(chars[0:1].ctypes.data, chars[1:2].ctypes.data, chars[2:3].ctypes.data,
-          ints[0:1].ctypes.data, ints[1:2].ctypes.data, ints[2:3].ctypes.data,
-          ab.ctypes.data, ints[3:4].ctypes.data, b.ctypes.data, ints[4:5].ctypes.data,
-          ints[5:6].ctypes.data)
-    return ints[5]
+def gram_rows(syrk, y, alpha, out):
+    """out ← α yᵀy for y in C order (n × k: its memory is yᵀ in Fortran order; out k × k,
+    Fortran order), as :func:`gram`."""
+    n, k = y.shape
+    chars = np.array([_LOWER, _NO], np.uint8)
+    ints = np.array([k, n, max(k, 1), max(k, 1)], np.int32)  # n, k, lda, ldc (BLAS names)
+    scalars = np.array([alpha, 0.0])
+    syrk(chars[0:1].ctypes.data, chars[1:2].ctypes.data, ints[0:1].ctypes.data,
+         ints[1:2].ctypes.data, scalars[0:1].ctypes.data, y.ctypes.data, ints[2:3].ctypes.data,
+         scalars[1:2].ctypes.data, out.ctypes.data, ints[3:4].ctypes.data)
+    for j in range(k):
+        for i in range(j + 1, k):
+            out[j, i] = out[i, j]
