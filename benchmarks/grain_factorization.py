@@ -124,7 +124,7 @@ def main() -> None:
     parser.add_argument("--calls", type=int, default=60)
     parser.add_argument("--repeat", type=int, default=5)
     args = parser.parse_args()
-    print("| run | grains | n | kd | sites | direction dense / band µs | ratio | "
+    print("| run | calls | n | kd | sites | direction dense / band µs | ratio | "
           "compliance dense / band µs | ratio | max diff du / W |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for run in args.runs:

@@ -201,13 +201,69 @@ def test_the_banded_solve_and_compliance_are_the_dense_ones(newton_matrix, inert
 
 
 def test_an_indefinite_symmetric_part_is_refused(newton_matrix):
-    """Where Ā is not positive definite banded.factorize says so (LAPACK's info), for the
-    caller's dense A_s."""
-    A, rotations, c_m, _ = newton_matrix
-    A = (A - 2.0 * np.abs(A).max() * sp.eye(A.shape[0])).tobsr(blocksize=(2, 2))
+    """At a quasi-static step's inertia (c_m = 1e-6 max|K| / m) the loaded body's Ā is
+    indefinite through the rotation's coupling to the strain alone, while A_s is positive
+    definite: banded.factorize says so (LAPACK's info, late in the factorization), for
+    the caller's dense A_s, which Cholesky factorises."""
+    A, rotations, c_m, m = newton_matrix
+    c_m *= 1e-3
+    A = (A - 999.0 * c_m * sp.diags(np.repeat(m, 2))).tobsr(blocksize=(2, 2))
     A.sort_indices()
+    full = A.toarray()
+    assert np.linalg.eigvalsh(0.5 * (full + full.T)).min() < 0.0
     info, _ = _banded(A, rotations, c_m * rotations.inertia)
-    assert info > 0
+    assert info > A.shape[0] // 2
+    A_s = decoupled_dense(A, rotations, c_m * rotations.inertia)
+    assert isinstance(symmetric_factorization(A_s), DenseCholesky)
+
+
+def test_the_band_and_its_update_in_three_dimensions():
+    """banded.py with d = 3 and k = 3 rotations (a random banded SPD Ā of 3 × 3 blocks,
+    rigid rotations of random node positions): solves and the compliance are the dense
+    A_s's (rotations.decoupled_dense) to ~1e-11."""
+    rng = np.random.default_rng(8)
+    nodes, reach = 60, 5  # block bandwidth
+    blocks = {}
+    for r in range(nodes):
+        for c in range(max(0, r - reach), min(nodes, r + reach + 1)):
+            blocks[r, c] = rng.standard_normal((3, 3)) * (0.2 if r != c else 1.0)
+    dense_A = np.zeros((3 * nodes, 3 * nodes))
+    for (r, c), block in blocks.items():
+        dense_A[3 * r:3 * r + 3, 3 * c:3 * c + 3] = block
+    dense_A += 0.3 * (dense_A - dense_A.T)  # not symmetric, as the momentum tangent
+    dense_A += 20.0 * np.eye(3 * nodes)
+    A = sp.bsr_matrix(dense_A, blocksize=(3, 3))
+    A.sort_indices()
+    positions, m = rng.random((nodes, 3)), 1.0 + rng.random(nodes)
+    rotations = RigidRotations.of(positions, m, lambda v: m[:, None] * v)
+    block = 0.1 * rotations.inertia
+    info, factorization = _banded(A, rotations, block)
+    assert info == 0 and factorization.U.shape == (3 * nodes, 6)
+    A_s = decoupled_dense(A, rotations, block)
+    b = rng.standard_normal((3 * nodes, 2))
+    exact = np.linalg.solve(A_s, b)
+    np.testing.assert_allclose(factorization.solve(b), exact, rtol=0.0,
+                               atol=1e-11 * np.abs(exact).max())
+    B = np.zeros((3 * nodes, 4))
+    B[rng.choice(3 * nodes, 10, replace=False), rng.integers(0, 4, 10)] = 1.0
+    expected = B.T @ np.linalg.solve(A_s, B)
+    np.testing.assert_allclose(factorization.compliance(B), expected, rtol=0.0,
+                               atol=1e-11 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize("n, kd, d, expected", [
+    (262, 55, 2, True),  # a grain at D/h 10
+    (262, 100, 2, False),  # a band of 0.38 of the unknowns: dense
+    (2946, 177, 2, True),  # a disk at D/h 40, above DENSE_LIMIT
+    (5278, 817, 2, False),  # a 200 × 10-cell slab along the grid's fastest axis
+    (3567, 908, 3, False),  # a sphere at D/h 10
+    (1200, 300, 3, True),  # a small 3D body, within DENSE_LIMIT: the band beats dense
+])
+def test_the_band_is_taken_where_it_pays(n, kd, d, expected):
+    """banded.band_pays: a band of at most BAND_FRACTION of the unknowns; above
+    DENSE_LIMIT (1500), where SuperLU factorised A_s, only a band as narrow as a body as
+    wide as it is tall on a 2D grid."""
+    assert banded.band_pays(n, kd, d, 1500) == expected
 
 
 def test_defect_correction_reaches_the_exact_direction(newton_matrix):
@@ -295,7 +351,7 @@ def test_the_one_call_dense_direction_is_the_general_paths(mass_matrix, monkeypa
     momentum form."""
     import softgrains.integrator.implicit as implicit
 
-    monkeypatch.setattr(implicit, "BAND_FRACTION", 0.0)
+    monkeypatch.setattr(implicit, "band_pays", lambda *args: False)
     step = _loaded_disk_step(mass_matrix=mass_matrix)
     du = step.newton_direction(direct=True)
     assert step._exact is None  # (the one-call path leaves no BSR matrix behind)
@@ -328,7 +384,7 @@ def test_the_one_call_banded_direction_is_the_general_paths(mass_matrix, monkeyp
     assert step.factorization().ab.shape[0] < step.u.size // 3
     rows = np.arange(0, step.u.shape[0], 7)
     _, W = step.contact_response(rows, True)
-    monkeypatch.setattr(implicit, "BAND_FRACTION", 0.0)
+    monkeypatch.setattr(implicit, "band_pays", lambda *args: False)
     general = step._momentum_direction(step._matrix())
     assert isinstance(step.factorization(), DenseCholesky)
     scale = float(np.abs(general).max())
@@ -354,12 +410,31 @@ def test_a_large_body_takes_the_band_on_the_general_path(stiffened, monkeypatch)
     assert isinstance(step.factorization(), BandedDecoupled)
     rows = np.arange(0, step.u.shape[0], 37)
     _, W = step.contact_response(rows, True)
-    monkeypatch.setattr(implicit, "BAND_FRACTION", 0.0)
+    monkeypatch.setattr(implicit, "band_pays", lambda *args: False)
     general = step._momentum_direction(step._matrix())
     assert isinstance(step.factorization(), DecoupledSparse)
     np.testing.assert_allclose(du, general, rtol=0.0, atol=1e-10 * float(np.abs(general).max()))
     _, W_sparse = step.contact_response(rows, True)
     np.testing.assert_allclose(W, W_sparse, rtol=0.0, atol=1e-10 * float(np.abs(W).max()))
+
+
+def test_a_large_body_whose_band_is_refused_takes_superlu(monkeypatch):
+    """On the general path above DENSE_LIMIT, where the band factorization is refused (Ā
+    not positive definite) the body takes DecoupledSparse, and keeps it for the step."""
+    import softgrains.integrator.implicit as implicit
+
+    calls = []
+
+    def refused(*args):
+        calls.append(1)
+
+    monkeypatch.setattr(implicit, "banded_decoupled", refused)
+    step = _loaded_disk_step(cell_size=0.025)
+    step.newton_direction(direct=True)
+    assert calls == [1] and isinstance(step.factorization(), DecoupledSparse)
+    step._lu = None
+    step._A = step._matrix()  # a second matrix in the same step: the band not tried again
+    assert calls == [1] and isinstance(step._A, DecoupledSparse)
 
 
 def test_an_indefinite_band_leaves_the_direction_to_the_dense_kernel(monkeypatch):

@@ -15,11 +15,11 @@ n kd² work against n³/3 for A_s dense) and the Woodbury identity
 a solve is a band solve (n kd against n² work) plus 2k columns. Ā positive definite makes
 A_s positive definite (xᵀA_s x = (Px)ᵀĀ(Px) + (Qᵀx)ᵀB(Qᵀx), zero only for x = 0 since
 PR = 0 and QᵀR = I); where Ā is not, the band Cholesky says so and the caller factorises
-A_s dense (its Cholesky or LU). Solves agree with the dense Cholesky of A_s to ~1e-12
-(relative, the dense compaction's grains; tests/kernels/test_momentum_form.py). The
-contacts' compliance BᵀA_s⁻¹B takes L⁻¹B by rows from each site column's first entry
-(:func:`_lower_solve_rows`: 2.2× faster than LAPACK's band solve, tbtrs, on a grain's
-site columns).
+A_s dense (its Cholesky or LU). Solves agree with the dense Cholesky of A_s to 1e-13–6e-12
+(relative, the dense compaction's grains; 4.5e-11 at a quasi-static squeeze step, cond
+2.5e7; tests/kernels/test_momentum_form.py). The contacts' compliance BᵀA_s⁻¹B takes
+L⁻¹B by rows from each site column's first entry (:func:`_lower_solve_rows`: 2.2× faster
+than LAPACK's band solve, tbtrs, on a grain's site columns).
 """
 
 from __future__ import annotations
@@ -30,9 +30,26 @@ from numba import njit
 from softgrains.integrator import lapack
 
 # the band path is taken where the band (kd + 1 rows) is at most this fraction of the
-# unknowns: its factorization's work n kd² against n³/3, with its 2k extra solves (not
-# tuned: measured at 0.21 (D/h 10, 0.43 against 0.62 ms a direction) and ~0.1 (D/h 20))
+# unknowns: its factorization's work n kd² against the dense A_s's n³/3, with its 2k extra
+# solves (not tuned: measured at 0.21, D/h 10, a direction 0.40 against 0.61 ms, and 0.12,
+# D/h 20, 1.5 against 6.6 ms)
 BAND_FRACTION = 0.35
+# above DENSE_LIMIT (where SuperLU factorised A_s) the band is taken only where
+# kd ≤ NARROW_BAND √(d n): the band of a body about as wide as it is tall on a 2D grid
+# (disks at D/h 40 and 80: kd 177 and 337 against 230 and 443, factorised 6.5 and 9×
+# faster than by SuperLU). A 3D body's band grows as n^(2/3), and a body long along the
+# grid's fastest axis has a band of that length: SuperLU's fill grows more slowly (a
+# 200 × 10-cell slab along x: kd 817, n kd² ~ 3.5 GFlop)
+NARROW_BAND = 3.0
+
+
+def band_pays(n: int, kd: int, d: int, dense_limit: int) -> bool:
+    """Whether A_s (n unknowns, dimension d) is factorised as its band (lower bandwidth kd)
+    rather than dense (n ≤ ``dense_limit``) or by SuperLU (above): see BAND_FRACTION and
+    NARROW_BAND."""
+    if kd + 1 > BAND_FRACTION * n:
+        return False
+    return n <= dense_limit or kd <= NARROW_BAND * np.sqrt(d * n)
 
 
 def lower_bandwidth(indptr: np.ndarray, indices: np.ndarray, d: int) -> int:
@@ -122,8 +139,9 @@ def factorize(pbtrf, pbtrs, indptr, indices, data, R, Q, block, ab, U, BU, capac
 
 @njit(cache=True, nogil=True)
 def solve(pbtrs, ab, U, BU, capacitance, x):
-    """x ← A_s⁻¹ x (x a vector): the band solve, then the Woodbury correction."""
-    lapack.band_cholesky_solve(pbtrs, ab, x)
+    """x ← A_s⁻¹ x (x a vector): the band solve, then the Woodbury correction. Returns the
+    band solve's LAPACK info."""
+    info = lapack.band_cholesky_solve(pbtrs, ab, x)
     m = U.shape[1]
     t = np.zeros(m)
     for a in range(m):
@@ -137,12 +155,13 @@ def solve(pbtrs, ab, U, BU, capacitance, x):
         for a in range(m):
             acc += BU[i, a] * s[a]
         x[i] -= acc
+    return info
 
 
 @njit(cache=True, nogil=True)
 def _solve_columns(pbtrs, ab, U, BU, capacitance, X):
-    """X ← A_s⁻¹ X (X n × m, Fortran order)."""
-    lapack.band_cholesky_solve(pbtrs, ab, X)
+    """X ← A_s⁻¹ X (X n × m, Fortran order). Returns the band solve's LAPACK info."""
+    info = lapack.band_cholesky_solve(pbtrs, ab, X)
     S = capacitance @ (U.T @ X)
     for j in range(X.shape[1]):
         for i in range(X.shape[0]):
@@ -150,6 +169,7 @@ def _solve_columns(pbtrs, ab, U, BU, capacitance, X):
             for a in range(U.shape[1]):
                 acc += BU[i, a] * S[a, j]
             X[i, j] -= acc
+    return info
 
 
 @njit(cache=True, nogil=True)
@@ -159,7 +179,7 @@ def _lower_solve_rows(ab, B, order, starts, Y):
     by row, each row's update of the kd rows below it applied to the columns begun by
     then, which are contiguous (the same operations per column as LAPACK's band solve,
     tbsv, without the rows above a column's first entry: a grain's site columns begin
-    0.38 of the way down in the median)."""
+    0.38 of the way down on average)."""
     n, m = Y.shape
     kd = ab.shape[0] - 1
     for i in range(n):
@@ -202,7 +222,6 @@ def _compliance(syrk, ab, BU, capacitance, B, alpha, Y, out):
             out[order[a], order[b]] = gram[a, b]
     V = B.T @ BU
     correction = V @ capacitance @ V.T
-    m = B.shape[1]
     for j in range(m):
         for i in range(j, m):
             value = alpha * 0.5 * (correction[i, j] + correction[j, i])
@@ -237,10 +256,10 @@ class BandedDecoupled:
 
     def solve(self, b: np.ndarray) -> np.ndarray:
         x = np.array(b, float, order="F")
-        if x.ndim == 1:
-            solve(lapack.DPBTRS, self.ab, self.U, self.BU, self.capacitance, x)
-        else:
-            _solve_columns(lapack.DPBTRS, self.ab, self.U, self.BU, self.capacitance, x)
+        kernel = solve if x.ndim == 1 else _solve_columns
+        info = kernel(lapack.DPBTRS, self.ab, self.U, self.BU, self.capacitance, x)
+        if info != 0:
+            raise RuntimeError(f"LAPACK pbtrs failed (info {info})")
         return x
 
     def compliance(self, B: np.ndarray, alpha: float = 1.0) -> np.ndarray:

@@ -56,11 +56,7 @@ from softgrains.integrator.assembly import (
     point_stresses,
     start_strain_energy,
 )
-from softgrains.integrator.banded import (
-    BAND_FRACTION,
-    BandedDecoupled,
-    lower_bandwidth,
-)
+from softgrains.integrator.banded import BandedDecoupled, band_pays, lower_bandwidth
 from softgrains.integrator.banded import decoupled as banded_decoupled
 from softgrains.integrator.dense_direction import (
     DONE,
@@ -548,12 +544,13 @@ class BodyStep:
         return self._bandwidth
 
     def _band_applies(self) -> bool:
-        """Whether A_s is tried as Ā's band and a rank-2k update (banded.py): a band of at
-        most BAND_FRACTION of the unknowns, and Ā not found indefinite earlier in the step
-        (at quasi-static steps it mostly is: the rotation's inertia is tiny against its
+        """Whether A_s is tried as Ā's band and a rank-2k update (banded.py): where the band
+        pays (banded.band_pays: narrow against the unknowns, and above DENSE_LIMIT against
+        the body's size too), and Ā was not found indefinite earlier in the step (at
+        quasi-static steps it mostly is: the rotation's inertia is tiny against its
         coupling to the strain, ½Kρ)."""
-        return (not self._band_refused
-                and self._lower_bandwidth() + 1 <= BAND_FRACTION * self.u.size)
+        return not self._band_refused and band_pays(self.u.size, self._lower_bandwidth(),
+                                                    self.d, DENSE_LIMIT)
 
     def _rigid_rotations(self) -> RigidRotations:
         """The body's rigid rotations about its nodal mass centre (set up once a step)."""
@@ -866,9 +863,9 @@ class BodyStep:
     def _dense_momentum_direction(self) -> np.ndarray | None:
         """:meth:`_momentum_direction`'s du for a body up to DENSE_LIMIT unknowns whose
         rotation is not stiffened, in one call that releases the GIL: A_s factorised as
-        Ā's band and a rank-2k update where the band is narrow (BAND_FRACTION) and Ā
-        positive definite (dense_direction.banded_momentum_direction, banded.py: 0.43
-        against 0.62 ms a grain of the dense compaction at D/h 10), else dense
+        Ā's band and a rank-2k update where the band pays (banded.band_pays) and Ā is
+        positive definite (dense_direction.banded_momentum_direction, banded.py: 0.40
+        against 0.61 ms a grain of the dense compaction at D/h 10), else dense
         (dense_direction.momentum_direction: the general path's kernels in the same
         order); None where it does not apply, A_s is not positive definite or the iterate
         inverts a point (the general path then)."""

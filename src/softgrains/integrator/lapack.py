@@ -1,4 +1,5 @@
-"""Dense LAPACK and BLAS called from Numba kernels that release the GIL.
+"""LAPACK and BLAS (dense and band routines) called from Numba kernels that release the
+GIL.
 
 SciPy's f2py wrappers (scipy.linalg.lapack, scipy.linalg.blas) hold the GIL while LAPACK
 runs, so the bodies' factorizations on the threads of :func:`softgrains.threads.over_bodies`
@@ -9,8 +10,9 @@ threads; through these kernels 0.38 s and 0.20 s). The routines are SciPy's own
 first-class function argument: a function address read as a global would keep Numba from
 caching the kernel.
 
-Every matrix is in Fortran (column) order; the kernels work in place. Scalars go to
-Fortran by reference, through small arrays.
+Every matrix is in Fortran (column) order (:func:`gram_rows` reads a C-ordered one as its
+transpose); band matrices are LAPACK's lower band storage ab[i − j, j] = a_ij. The kernels
+work in place. Scalars go to Fortran by reference, through small arrays.
 """
 
 from __future__ import annotations
@@ -165,7 +167,7 @@ def band_cholesky_solve(pbtrs, ab, b):
     Fortran-ordered matrix. Returns LAPACK's info."""
     kd, n = ab.shape[0] - 1, ab.shape[1]
     chars = np.array([_LOWER], np.uint8)
-    ints = np.array([n, kd, _columns(b), kd + 1, max(n, 1), 0], np.int32)
+    ints = np.array([n, kd, _columns(b), max(kd + 1, 1), max(n, 1), 0], np.int32)
     pbtrs(chars.ctypes.data, ints[0:1].ctypes.data, ints[1:2].ctypes.data,
           ints[2:3].ctypes.data, ab.ctypes.data, ints[3:4].ctypes.data, b.ctypes.data,
           ints[4:5].ctypes.data, ints[5:6].ctypes.data)

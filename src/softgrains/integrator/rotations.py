@@ -31,6 +31,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from softgrains.integrator.banded import BandedDecoupled
 from softgrains.integrator.linear_solvers import DenseCholesky, DenseLU
 
 # defect corrections x ← x + A_s⁻¹(b − A x) of a direction at most, and their stopping test
@@ -171,7 +172,7 @@ def symmetric_factorization(A_s):
     """Cholesky of the dense symmetric A_s (a copy), or its LU where it is not positive
     definite (its negative modes are then a material's own: the rotations are not); a
     :class:`DecoupledSparse` or a banded.BandedDecoupled is its own factorization."""
-    if not isinstance(A_s, np.ndarray):
+    if isinstance(A_s, (DecoupledSparse, BandedDecoupled)):
         return A_s
     cholesky = DenseCholesky.attempt(np.array(A_s, order="F"))
     return cholesky if cholesky is not None else DenseLU(A_s)
