@@ -60,11 +60,13 @@ def lower_bandwidth(indptr: np.ndarray, indices: np.ndarray, d: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def symmetric_band(indptr, indices, data, ab):
-    """ab ← the lower band of Ā = ½(A + Aᵀ) (ab[i − j, j] = Ā_ij, (kd + 1) × n) from the BSR
-    matrix A (indptr, indices, data); kd must hold A's pattern (:func:`lower_bandwidth`)."""
+def _symmetric_band_times(indptr, indices, data, X, ab, out):
+    """In one pass over the BSR matrix A (indptr, indices, data): ab ← the lower band of
+    Ā = ½(A + Aᵀ) (ab[i − j, j] = Ā_ij, (kd + 1) × n; kd must hold A's pattern,
+    :func:`lower_bandwidth`) and out ← Ā X (X and out n × m, m ≥ 0)."""
     d = data.shape[1]
     ab[:, :] = 0.0
+    out[:, :] = 0.0
     for r in range(indptr.shape[0] - 1):
         for q in range(indptr[r], indptr[r + 1]):
             c = indices[q]
@@ -76,23 +78,16 @@ def symmetric_band(indptr, indices, data, ab):
                         ab[row - col, col] += half
                     if col >= row:
                         ab[col - row, row] += half
-
-
-@njit(cache=True, nogil=True)
-def _symmetric_times(indptr, indices, data, X, out):
-    """out = Ā X (Ā = ½(A + Aᵀ), A the BSR matrix; X and out n × m)."""
-    d = data.shape[1]
-    out[:, :] = 0.0
-    for r in range(indptr.shape[0] - 1):
-        for q in range(indptr[r], indptr[r + 1]):
-            c = indices[q]
-            for i in range(d):
-                for j in range(d):
-                    row, col = r * d + i, c * d + j
-                    half = 0.5 * data[q, i, j]
                     for a in range(X.shape[1]):
                         out[row, a] += half * X[col, a]
                         out[col, a] += half * X[row, a]
+
+
+@njit(cache=True, nogil=True)
+def symmetric_band(indptr, indices, data, ab):
+    """ab ← the lower band of Ā = ½(A + Aᵀ) (:func:`_symmetric_band_times`)."""
+    none = np.empty((ab.shape[1], 0))
+    _symmetric_band_times(indptr, indices, data, none, ab, none.copy())
 
 
 @njit(cache=True, nogil=True)
@@ -102,12 +97,11 @@ def factorize(pbtrf, pbtrs, indptr, indices, data, R, Q, block, ab, U, BU, capac
     ``block`` B k × k). Returns the band Cholesky's info (≠ 0: Ā is not positive definite;
     the rest is then unset)."""
     n, k = R.shape
-    symmetric_band(indptr, indices, data, ab)
+    AR = np.empty((n, k))
+    _symmetric_band_times(indptr, indices, data, R, ab, AR)
     info = lapack.band_cholesky(pbtrf, ab)
     if info != 0:
         return info
-    AR = np.empty((n, k))
-    _symmetric_times(indptr, indices, data, R, AR)
     for i in range(n):
         for a in range(k):
             U[i, a] = Q[i, a]

@@ -127,12 +127,12 @@ def lu_solve(getrs, factors, pivots, b):
 
 
 @njit(cache=True, nogil=True)
-def gram(syrk, y, alpha, out):
-    """out ← α yᵀy (y Fortran-ordered, n × k; out k × k): the lower triangle by syrk
-    (half of the product's work), the upper copied from it, so out is exactly symmetric."""
-    n, k = y.shape
-    chars = np.array([_LOWER, _TRANSPOSED], np.uint8)
-    ints = np.array([k, n, max(n, 1), max(k, 1)], np.int32)  # n, k, lda, ldc (BLAS names)
+def _lower_gram(syrk, trans, k, n, lda, y, alpha, out):
+    """out ← α yᵀy (k × k, Fortran order) by BLAS syrk: y's memory read as the n × k
+    Fortran matrix y (``trans`` "T", lda n) or as its k × n transpose (``trans`` "N", lda
+    k); the lower triangle computed, the upper copied from it (exactly symmetric)."""
+    chars = np.array([_LOWER, trans], np.uint8)
+    ints = np.array([k, n, lda, max(k, 1)], np.int32)  # n, k, lda, ldc (BLAS names)
     scalars = np.array([alpha, 0.0])
     syrk(chars[0:1].ctypes.data, chars[1:2].ctypes.data, ints[0:1].ctypes.data,
          ints[1:2].ctypes.data, scalars[0:1].ctypes.data, y.ctypes.data, ints[2:3].ctypes.data,
@@ -140,6 +140,14 @@ def gram(syrk, y, alpha, out):
     for j in range(k):  # out is Fortran-ordered: out[i, j], i ≥ j, is the lower triangle
         for i in range(j + 1, k):
             out[j, i] = out[i, j]
+
+
+@njit(cache=True, nogil=True)
+def gram(syrk, y, alpha, out):
+    """out ← α yᵀy (y Fortran-ordered, n × k; out k × k): the lower triangle by syrk
+    (half of the product's work), the upper copied from it, so out is exactly symmetric."""
+    n, k = y.shape
+    _lower_gram(syrk, _TRANSPOSED, k, n, max(n, 1), y, alpha, out)
 
 
 @njit(cache=True, nogil=True)
@@ -179,12 +187,4 @@ def gram_rows(syrk, y, alpha, out):
     """out ← α yᵀy for y in C order (n × k: its memory is yᵀ in Fortran order; out k × k,
     Fortran order), as :func:`gram`."""
     n, k = y.shape
-    chars = np.array([_LOWER, _NO], np.uint8)
-    ints = np.array([k, n, max(k, 1), max(k, 1)], np.int32)  # n, k, lda, ldc (BLAS names)
-    scalars = np.array([alpha, 0.0])
-    syrk(chars[0:1].ctypes.data, chars[1:2].ctypes.data, ints[0:1].ctypes.data,
-         ints[1:2].ctypes.data, scalars[0:1].ctypes.data, y.ctypes.data, ints[2:3].ctypes.data,
-         scalars[1:2].ctypes.data, out.ctypes.data, ints[3:4].ctypes.data)
-    for j in range(k):
-        for i in range(j + 1, k):
-            out[j, i] = out[i, j]
+    _lower_gram(syrk, _NO, k, n, max(k, 1), y, alpha, out)
