@@ -518,8 +518,9 @@ class BodyStep:
         stiffened) and its symmetric form with the
         rigid rotations decoupled (rotations.py) is returned: dense up to DENSE_LIMIT
         unknowns, above as its factorization (:class:`DecoupledSparse`); where the band
-        is narrow and Ā positive definite, at any size, as the factorization of its band
-        and rank-2k update (banded.py: against DecoupledSparse, a disk of 2946 unknowns
+        pays (banded.band_pays, also above DENSE_LIMIT for a body as wide as it is tall on
+        a 2D grid) and Ā is positive definite, as the factorization of its band and
+        rank-2k update (banded.py: against DecoupledSparse, a disk of 2946 unknowns
         (D/h 40) factorised in 5.6 against 36.5 ms and its compliance at 150 sites formed
         in 14 against 67 ms; 10 898 unknowns (D/h 80) 49 against 456 and 125 against
         457 ms)."""
