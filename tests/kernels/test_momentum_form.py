@@ -418,6 +418,32 @@ def test_a_large_body_takes_the_band_on_the_general_path(stiffened, monkeypatch)
     np.testing.assert_allclose(W, W_sparse, rtol=0.0, atol=1e-10 * float(np.abs(W).max()))
 
 
+@pytest.mark.parametrize("along_x", [True, False])
+def test_a_slab_long_along_the_grids_fastest_axis_keeps_superlu(along_x):
+    """A free slab of 100 × 6 cells (above DENSE_LIMIT): lying along x, the axis its nodes
+    are numbered along first, its band holds a whole row of the box and band_pays leaves
+    it to SuperLU (DecoupledSparse); standing along y its band is narrow and taken."""
+    from softgrains import Simulation, load_case
+    from softgrains.integrator.implicit import BodyStep
+    from softgrains.integrator.linear_solvers import DENSE_LIMIT
+
+    size = [10.0, 0.6] if along_x else [0.6, 10.0]
+    sim = Simulation(load_case({
+        "simulation": {"dt": 1e-3, "steps": 1},
+        "grid": {"cell_size": 0.1, "origin": [0.0, 0.0], "size": [11.0, 11.0]},
+        "materials": {"gel": {"young": 1e5, "poisson": 0.3, "density": 1000.0}},
+        "bodies": [{"name": "slab", "shape": "rectangle", "lower": [0.5, 0.5],
+                    "upper": [0.5 + size[0], 0.5 + size[1]], "material": "gel"}],
+        "output": {"progress": False},
+    }))
+    step = BodyStep(sim.solver.steppers[0], sim.solver.body_points(sim.state, 0),
+                    np.array([0.0, -9.81]), 1e-3, 0)
+    assert step.momentum_form and step.u.size > DENSE_LIMIT
+    step.newton_direction(direct=True)
+    expected = DecoupledSparse if along_x else BandedDecoupled
+    assert isinstance(step.factorization(), expected)
+
+
 def test_a_large_body_whose_band_is_refused_takes_superlu(monkeypatch):
     """On the general path above DENSE_LIMIT, where the band factorization is refused (Ā
     not positive definite) the body takes DecoupledSparse, and keeps it for the step."""
