@@ -153,23 +153,26 @@ def _banded(A, rotations, block):
 
 
 def test_the_band_is_the_symmetric_parts(newton_matrix):
-    """banded.symmetric_band: Ā = ½(A + Aᵀ) of the (non-symmetric) momentum tangent, all of
-    it within the lower bandwidth of A's pattern."""
-    A = newton_matrix[0]
+    """banded._symmetric_band_times: the lower band of Ā = ½(A + Aᵀ) of the (non-symmetric)
+    momentum tangent, whose entries all lie within the lower bandwidth of A's pattern, and
+    Ā R (the rotations), in one pass over A's blocks."""
+    A, rotations = newton_matrix[:2]
     kd = banded.lower_bandwidth(A.indptr, A.indices, 2)
     full = A.toarray()
     rows, cols = np.nonzero(full)
     assert (rows - cols).max() <= kd <= (rows - cols).max() + 1  # (whole 2 × 2 blocks)
     assert kd < A.shape[0] // 3  # a band: rows of the node box, not the whole body
     ab = np.empty((kd + 1, A.shape[0]), order="F")
-    banded.symmetric_band(A.indptr, A.indices, A.data, ab)
+    AR = np.empty(rotations.fields.shape)
+    banded._symmetric_band_times(A.indptr, A.indices, A.data, rotations.fields, ab, AR)
     symmetric = 0.5 * (full + full.T)
     expected = np.zeros_like(ab)
     for j in range(A.shape[0]):
         column = symmetric[j:j + kd + 1, j]
         expected[:column.size, j] = column
     np.testing.assert_allclose(ab, expected, rtol=0.0, atol=1e-15 * np.abs(full).max())
-    assert np.abs(np.tril(symmetric, -kd - 1)).max() == 0.0
+    exact = symmetric @ rotations.fields
+    np.testing.assert_allclose(AR, exact, rtol=0.0, atol=1e-13 * np.abs(exact).max())
 
 
 @pytest.mark.parametrize("inertia", [1e-3, 1.0])

@@ -84,13 +84,6 @@ def _symmetric_band_times(indptr, indices, data, X, ab, out):
 
 
 @njit(cache=True, nogil=True)
-def symmetric_band(indptr, indices, data, ab):
-    """ab ← the lower band of Ā = ½(A + Aᵀ) (:func:`_symmetric_band_times`)."""
-    none = np.empty((ab.shape[1], 0))
-    _symmetric_band_times(indptr, indices, data, none, ab, none.copy())
-
-
-@njit(cache=True, nogil=True)
 def factorize(pbtrf, pbtrs, indptr, indices, data, R, Q, block, ab, U, BU, capacitance):
     """A_s of the module docstring from the BSR A: ab ← L (Ā = L Lᵀ, band storage), U =
     [Q, ĀR], BU = Ā⁻¹U, ``capacitance`` = (C⁻¹ + UᵀĀ⁻¹U)⁻¹ (U, BU n × 2k in Fortran order,
@@ -154,16 +147,13 @@ def solve(pbtrs, ab, U, BU, capacitance, x):
 
 @njit(cache=True, nogil=True)
 def _solve_columns(pbtrs, ab, U, BU, capacitance, X):
-    """X ← A_s⁻¹ X (X n × m, Fortran order). Returns the band solve's LAPACK info."""
-    info = lapack.band_cholesky_solve(pbtrs, ab, X)
-    S = capacitance @ (U.T @ X)
+    """X ← A_s⁻¹ X (X n × m, Fortran order), column by column as :func:`solve`. Returns the
+    first failed band solve's LAPACK info, else 0."""
     for j in range(X.shape[1]):
-        for i in range(X.shape[0]):
-            acc = 0.0
-            for a in range(U.shape[1]):
-                acc += BU[i, a] * S[a, j]
-            X[i, j] -= acc
-    return info
+        info = solve(pbtrs, ab, U, BU, capacitance, X[:, j])
+        if info != 0:
+            return info
+    return 0
 
 
 @njit(cache=True, nogil=True)
